@@ -1,0 +1,14 @@
+"""mjx_hands: demonstration-guided RL of dexterous human-robot hand interactions in MJX.
+
+``make_env`` is imported lazily so that ``import mjx_hands`` stays cheap.
+"""
+
+__all__ = ["make_env", "TASKS"]
+TASKS = ("handshake", "handclap", "et")
+
+
+def make_env(*args, **kwargs):
+    """See :func:`mjx_hands.env.make_env`."""
+    from mjx_hands.env import make_env as _make_env
+
+    return _make_env(*args, **kwargs)

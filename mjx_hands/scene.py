@@ -1,0 +1,287 @@
+"""The hand-pair scene, composed with ``mujoco.MjSpec`` and made lean for MJX.
+
+Agent: the 4-DoF arm of ``scenes/arm.xml`` carrying the gymnasium-robotics Shadow
+hand (24 DoF, 20 actuators). Controls: ``ARM_JOINTS + HAND_JOINTS`` (24), position
+servos whose set-points span each joint's range.
+
+Target: a second Shadow hand built from **mocap bodies** -- one per rigid link,
+posed per episode by the environment from forward kinematics of the requested
+finger angles (:class:`TargetKinematics`). It adds no degree of freedom and no
+constraint row except its contacts with the agent.
+
+What was changed from the stock hand model, and why (each item removes solver work):
+
+* the 88 fixed tendons go: most only mirror joint limits; the four distal couplings
+  ``J0 ~ J1`` become joint equalities (1 row each);
+* ``frictionloss`` goes (1 row per joint in MJX, always allocated);
+* every geom gets ``contype = conaffinity = 0``: the only contacts are explicit
+  ``<pair>``s between agent collision geoms and target collision geoms, capped by
+  the MJX numerics ``max_geom_pairs`` / ``max_contact_points``;
+* the forearm's convex mesh collider goes (MJX mesh collisions are slow to
+  compile and run); visual meshes stay for rendering and never collide;
+* no gravity (a gravity-compensated arm; the target hand is kinematic).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+
+import mujoco
+import numpy as np
+
+from mjx_hands import shadow_hand as sh
+
+SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+AGENT = "agent/"
+TARGET = "target/"
+
+# Bodies of the hand whose collision geoms take part in agent-target contacts.
+COLLISION_BODIES = tuple(sh.PHALANX_BODY.values()) + ("palm", "lfmetacarpal")
+# Rigid links of the target hand that become mocap bodies (everything with a geom).
+TARGET_LINKS = (
+    "forearm", "wrist", "palm",
+    "ffknuckle", "ffproximal", "ffmiddle", "ffdistal",
+    "mfknuckle", "mfproximal", "mfmiddle", "mfdistal",
+    "rfknuckle", "rfproximal", "rfmiddle", "rfdistal",
+    "lfmetacarpal", "lfknuckle", "lfproximal", "lfmiddle", "lfdistal",
+    "thproximal", "thmiddle", "thdistal",
+)  # fmt: skip
+DISTAL_BODY = {f: f"{f}distal" for f in sh.FINGERS}
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneConfig:
+    """Physics settings of the hand-pair scene (all trade accuracy for speed)."""
+
+    timestep: float = 0.004
+    """Physics step, seconds. The control period is a multiple of it."""
+    solver_iterations: int = 4
+    """Newton solver iterations per physics step."""
+    ls_iterations: int = 8
+    """Line-search iterations per solver iteration."""
+    max_geom_pairs: int = 12
+    """MJX: geom pairs kept per collision-function group (the closest ones)."""
+    max_contact_points: int = 16
+    """MJX: contacts kept per collision-function group."""
+    condim: int = 3
+    """Contact dimensionality of agent-target pairs (3: sliding friction)."""
+    friction: float = 1.0
+    """Sliding friction coefficient of agent-target contacts."""
+
+
+def _hand_spec() -> mujoco.MjSpec:
+    """The stock gymnasium-robotics hand, loaded through its ``reach.xml`` wrapper."""
+    return mujoco.MjSpec.from_file(os.path.join(sh.asset_dir(), "reach.xml"))
+
+
+def _clean_hand(spec: mujoco.MjSpec) -> dict[str, tuple[float, float, float]]:
+    """Strip the stock hand down for MJX (see module docstring); in place.
+
+    Returns the stock actuators' ``(kp, force_lo, force_hi)`` by joint name, so that
+    they can be re-created in the project's actuator order.
+    """
+    servo = {}
+    for act in list(spec.actuators):
+        servo[act.target.removeprefix(sh.PREFIX)] = (
+            float(act.gainprm[0]), float(act.forcerange[0]), float(act.forcerange[1])
+        )
+        spec.delete(act)
+    for element in list(spec.tendons) + list(spec.sensors) + list(spec.pairs):
+        spec.delete(element)
+    for name in ("target0", "target1", "target2", "target3", "target4"):
+        spec.delete(spec.site(name))
+    for name in ("finger0", "finger1", "finger2", "finger3", "finger4"):
+        spec.delete(spec.site(name))
+    spec.delete(spec.geom("floor0"))
+    spec.delete(spec.geom(sh.hand_name("C_forearm")))
+    for joint in spec.joints:
+        joint.frictionloss = 0.0
+    for geom in spec.geoms:
+        geom.contype = 0
+        geom.conaffinity = 0
+        geom.margin = 0.0
+    return servo
+
+
+def _add_hand_actuators(spec: mujoco.MjSpec, servo: dict, prefix: str) -> None:
+    """Position servos on the 20 hand joints in ``HAND_JOINTS`` order."""
+    for name in sh.HAND_JOINTS:
+        kp, flo, fhi = servo[name]
+        joint = spec.joint(prefix + sh.hand_name(name))
+        act = spec.add_actuator(name=f"{prefix}{name}", target=joint.name)
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_position(kp=kp, kv=0.05 * kp)
+        act.ctrlrange = joint.range
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [flo, fhi]
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+
+
+def _add_distal_couplings(spec: mujoco.MjSpec, prefix: str) -> None:
+    for distal, middle in sh.COUPLED_DISTAL_JOINTS.items():
+        data = np.zeros(mujoco.mjNEQDATA)
+        data[1] = sh.DISTAL_COUPLING  # J0 = c * J1 (polynomial coefficients)
+        spec.add_equality(
+            type=mujoco.mjtEq.mjEQ_JOINT,
+            name1=prefix + sh.hand_name(distal),
+            name2=prefix + sh.hand_name(middle),
+            data=data,
+        )
+
+
+def _add_agent(world: mujoco.MjSpec) -> None:
+    arm = mujoco.MjSpec.from_file(os.path.join(SCENE_DIR, "arm.xml"))
+    hand = _hand_spec()
+    servo = _clean_hand(hand)
+    for spec in (arm, hand):  # the stock hand declares user fields we do not use
+        spec.nuser_jnt = spec.nuser_site = spec.nuser_tendon = -1
+        spec.nuser_actuator = spec.nuser_sensor = -1
+    hand.option.timestep, hand.option.iterations = world.option.timestep, world.option.iterations
+    hand.njmax = hand.nconmax = -1
+    hand.body(sh.hand_name("forearm")).pos = [0, 0, 0]  # mount frame = forearm frame
+    world.worldbody.add_frame().attach_body(arm.body("shoulder_base"), AGENT, "")
+    world.site(AGENT + "hand_mount").attach_body(hand.body(sh.hand_name("forearm")), AGENT, "")
+    _add_hand_actuators(world, servo, AGENT)
+    _add_distal_couplings(world, AGENT)
+    palm = world.body(AGENT + sh.hand_name("palm"))
+    palm.add_site(name=AGENT + "palm_center", pos=list(sh.PALM_CENTER), size=[0.005] * 3)
+
+
+def _add_target(world: mujoco.MjSpec, hand_model: mujoco.MjModel) -> None:
+    """Copy every link of the (stock-posed) hand as a mocap body with its geoms."""
+    for link in TARGET_LINKS:
+        bid = hand_model.body(sh.hand_name(link)).id
+        body = world.worldbody.add_body(name=TARGET + link, mocap=True)
+        for gid in np.flatnonzero(hand_model.geom_bodyid == bid):
+            g = hand_model.geom(gid)
+            if g.name == sh.hand_name("C_forearm"):
+                continue
+            geom = body.add_geom(
+                name=TARGET + g.name.removeprefix(sh.PREFIX),
+                type=mujoco.mjtGeom(int(g.type[0])),
+                size=g.size,
+                pos=g.pos,
+                quat=g.quat,
+                rgba=[0.85, 0.72, 0.62, 1.0] if g.group[0] == 1 else [0.85, 0.72, 0.62, 0.0],
+                group=int(g.group[0]),
+                contype=0,
+                conaffinity=0,
+            )
+            if g.type[0] == mujoco.mjtGeom.mjGEOM_MESH:
+                geom.meshname = AGENT + hand_model.mesh(int(g.dataid[0])).name
+        if link == "palm":
+            body.add_site(name=TARGET + "palm_center", pos=list(sh.PALM_CENTER), size=[0.005] * 3)
+
+
+def _add_pairs(world: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    """Explicit agent-target contact pairs between collision geoms."""
+    agent = [g for g in world.geoms if g.name.startswith(AGENT + sh.hand_name("C_"))]
+    agent = [g for g in agent if g.parent.name.removeprefix(AGENT + sh.PREFIX) in COLLISION_BODIES]
+    target = [g for g in world.geoms if g.name.startswith(TARGET + "C_")]
+    target = [g for g in target if g.parent.name.removeprefix(TARGET) in COLLISION_BODIES]
+    for a in agent:
+        for t in target:
+            world.add_pair(
+                geomname1=a.name,
+                geomname2=t.name,
+                condim=cfg.condim,
+                friction=[cfg.friction, cfg.friction, 0.005, 0.0001, 0.0001],
+            )
+
+
+@functools.lru_cache(maxsize=None)
+def hand_kinematics_model() -> mujoco.MjModel:
+    """A lone, cleaned hand (palm at the stock mount pose): forward kinematics only."""
+    hand = _hand_spec()
+    _clean_hand(hand)
+    mount = hand.body(sh.hand_name("hand mount"))
+    mount.pos, mount.quat = [0, 0, 0], [1, 0, 0, 0]
+    hand.body(sh.hand_name("forearm")).pos = [0, 0, 0]
+    _add_distal_couplings(hand, "")
+    return hand.compile()
+
+
+def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
+    """The full hand-pair scene as an ``MjSpec`` (see module docstring)."""
+    world = mujoco.MjSpec.from_file(os.path.join(SCENE_DIR, "world.xml"))
+    world.option.timestep = cfg.timestep
+    world.option.iterations = cfg.solver_iterations
+    world.option.ls_iterations = cfg.ls_iterations
+    world.meshdir = os.path.join(sh.asset_dir(), "..", "stls", "hand")
+    _add_agent(world)
+    _add_target(world, hand_kinematics_model())
+    _add_pairs(world, cfg)
+    world.add_numeric(name="max_geom_pairs", data=[cfg.max_geom_pairs])
+    world.add_numeric(name="max_contact_points", data=[cfg.max_contact_points])
+    return world
+
+
+@functools.lru_cache(maxsize=None)
+def build_model(cfg: SceneConfig = SceneConfig()) -> mujoco.MjModel:
+    """Compiled hand-pair model (cached per config)."""
+    return build_spec(cfg).compile()
+
+
+@dataclasses.dataclass(frozen=True)
+class TargetPoses:
+    """Target-hand poses for a batch of finger configurations, in the palm frame.
+
+    The palm frame has its origin at the palm centre and the palm body's axes.
+
+    Attributes:
+      link_pos: (N, len(TARGET_LINKS), 3) positions of the mocap links.
+      link_quat: (N, len(TARGET_LINKS), 4) orientations of the mocap links.
+      point_pos: (N, 6, 3) palm centre (zero) and fingertips, ``HAND_POINTS`` order.
+      point_rot: (N, 6, 3, 3) palm body and distal-body orientations.
+    """
+
+    link_pos: np.ndarray
+    link_quat: np.ndarray
+    point_pos: np.ndarray
+    point_rot: np.ndarray
+
+
+def target_poses(angles: np.ndarray) -> TargetPoses:
+    """Forward kinematics of the lone hand for finger angles (N, 20) in HAND_JOINTS order.
+
+    Angles are clipped into the model's joint ranges (coupled distal joints too).
+    """
+    model = hand_kinematics_model()
+    data = mujoco.MjData(model)
+    qadr = [model.joint(sh.hand_name(n)).qposadr[0] for n in sh.ALL_HAND_JOINTS]
+    jrange = np.array([model.joint(sh.hand_name(n)).range for n in sh.ALL_HAND_JOINTS])
+    qpos = np.clip(sh.full_hand_angles(np.asarray(angles, np.float64)), jrange[:, 0], jrange[:, 1])
+    links = [model.body(sh.hand_name(n)).id for n in TARGET_LINKS]
+    point_bodies = [model.body(sh.hand_name("palm")).id] + [
+        model.body(sh.hand_name(DISTAL_BODY[f])).id for f in sh.FINGERS
+    ]
+    tips = [model.site(sh.hand_name(f"S_{t}")).id for t in sh.FINGERTIPS]
+    n = qpos.shape[0]
+    out = TargetPoses(
+        link_pos=np.zeros((n, len(links), 3)),
+        link_quat=np.zeros((n, len(links), 4)),
+        point_pos=np.zeros((n, 6, 3)),
+        point_rot=np.zeros((n, 6, 3, 3)),
+    )
+    palm = point_bodies[0]
+    for i in range(n):
+        data.qpos[qadr] = qpos[i]
+        mujoco.mj_kinematics(model, data)
+        rot_palm = data.xmat[palm].reshape(3, 3)
+        origin = data.xpos[palm] + rot_palm @ np.asarray(sh.PALM_CENTER)
+        to_palm = lambda x: (x - origin) @ rot_palm  # world -> palm frame (row vectors)
+        out.link_pos[i] = to_palm(data.xpos[links])
+        rel = rot_palm.T @ data.xmat[links].reshape(-1, 3, 3)
+        out.link_quat[i] = _mats_to_quats(rel)
+        out.point_pos[i, 1:] = to_palm(data.site_xpos[tips])
+        out.point_rot[i] = rot_palm.T @ data.xmat[point_bodies].reshape(-1, 3, 3)
+    return out
+
+
+def _mats_to_quats(mats: np.ndarray) -> np.ndarray:
+    quats = np.zeros((len(mats), 4))
+    for k, mat in enumerate(mats):
+        mujoco.mju_mat2Quat(quats[k], mat.reshape(9))
+    return quats
