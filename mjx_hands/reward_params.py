@@ -1,0 +1,381 @@
+"""Reward parameters from a demonstration: Algorithm 1 of Christen et al. (ICRA 2019).
+
+One human-human demonstration (a :class:`mjx_hands.mocap.Demonstration`) turns into
+the goals, weights and imitation references of the paper's reward, expressed so that
+the environment can evaluate them against the *simulated* target hand:
+
+1. Distances ``d^{ij}_t = ||p^i_t - p^j_t||`` between every actor fingertip ``i`` and
+   every target point ``j`` (``HAND_POINTS``: palm centre + 5 fingertips) for the
+   frames of the contact window ``t in [contact_begin, contact_end]``. (Searching the
+   whole approach picks, in several real handshakes, a frame before the hands meet:
+   the closest fingertip pair is then not the interaction's contact.)
+2. The closest approach ``(t_min, i_min, j_min) = argmin d^{ij}_t`` and ``d_min``.
+3. Goals relative to target body ``j_min``: ``Δp^i = R_{j_min}^T (p^i - p^{j_min})`` at
+   ``t_min`` for all 6 actor points; the environment places them on the simulated
+   target hand (:func:`mjx_hands.rewards.goal_positions`). Goal angles are the
+   actor's joint angles at ``t_min``.
+4. Imitation references for ``t <= t_min``: the same offsets and the actor's joint
+   angles along the demonstration, resampled to the control rate.
+5. Weights: ``ω^i_p = K_p · d_min / d^{i j_min}_{t_min}`` (the closest fingertip
+   gets ``K_p``, farther ones less), ``ω_α = K_α``, ``ω_a = K_a``, and
+   ``ω_c = K_c`` on the task's required contact sensors.
+
+Required contact sensors per task (``REQUIRED_CONTACTS``, names of
+``shadow_hand.CONTACT_SENSORS``); an episode succeeds when all of them touch:
+
+* ``handshake``: ``ff_middle, mf_middle, rf_middle, th_distal`` -- the fingers wrap
+  around the other hand and the thumb closes on its back.
+* ``handclap``: ``ff/mf/rf_proximal`` and ``ff/mf/rf_middle`` -- flat fingers
+  against the other's.
+* ``et``: ``ff_distal`` -- index fingertip to index fingertip.
+
+Time: demonstrations are captured at ``demo.fps`` Hz, the policy acts every ``dt``
+seconds. Control step ``k`` corresponds to capture frame ``k·fps·dt`` (linear
+interpolation between frames). The control step *of* a frame ``f`` is the last step at
+or before it, ``floor(f / (fps·dt))``.
+
+Everything here runs once on the host with NumPy; :func:`build_task_params` returns
+the stacked pytree as ``jax.Array`` leaves with a leading ``n_demos`` axis.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from mjx_hands import shadow_hand
+
+if TYPE_CHECKING:  # mocap is only needed for the type; keep this module importable alone
+    from mjx_hands.mocap import Demonstration
+
+CONTROL_DT = 0.04
+"""Default control period, seconds (the paper's 25 Hz policy)."""
+
+DISTANCE_FLOOR = 1e-3
+"""Metres. Distances in the position-weight ratio are floored here: a fingertip that
+touches its target point (d -> 0) would otherwise blow up ``K_p·d_min/d``. 1 mm is
+below marker precision, and flooring numerator and denominator alike keeps every
+weight in ``(0, K_p]``."""
+
+N_POINTS = len(shadow_hand.HAND_POINTS)  # 6: palm + 5 fingertips
+N_JOINTS = len(shadow_hand.HAND_JOINTS)  # 20
+N_SENSORS = len(shadow_hand.CONTACT_SENSORS)  # 15
+N_CONTROLS = len(shadow_hand.ARM_JOINTS) + N_JOINTS  # 24
+_TIPS = slice(1, N_POINTS)  # fingertip rows of a HAND_POINTS array
+
+REQUIRED_CONTACTS = {
+    "handshake": ("ff_middle", "mf_middle", "rf_middle", "th_distal"),
+    "handclap": (
+        "ff_proximal", "mf_proximal", "rf_proximal",
+        "ff_middle", "mf_middle", "rf_middle",
+    ),
+    "et": ("ff_distal",),
+}  # fmt: skip
+"""Contact sensors that must all touch the other hand for a task to succeed."""
+
+
+def required_contact_mask(task: str) -> np.ndarray:
+    """(15,) bool over ``CONTACT_SENSORS``: the sensors ``task`` requires."""
+    if task not in REQUIRED_CONTACTS:
+        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(REQUIRED_CONTACTS)}")
+    mask = np.zeros(N_SENSORS, bool)
+    mask[[shadow_hand.sensor_index(s) for s in REQUIRED_CONTACTS[task]]] = True
+    return mask
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardWeights:
+    """The paper's six reward knobs plus the switches of its ablations.
+
+    Frozen and hashable, so it can be a static argument / closed-over config.
+    """
+
+    K_p: float = 1.0
+    """Scale of the goal-position term; the closest fingertip's weight ``ω_p`` equals it."""
+    K_alpha: float = 0.1
+    """Weight of every hand joint in the goal-angle term (per radian)."""
+    K_c: float = 0.2
+    """Reward per required contact sensor in contact."""
+    K_a: float = 0.01
+    """Weight of every squared control in the action penalty. The paper states K_a = 1,
+    but with 24 set-point controls in [-1, 1] that penalty (up to 24) dominates the
+    metre-scale position terms, so the policy learns to keep still."""
+    K_pI: float = 0.5
+    """Scale of the imitation-position term relative to the position weights ``ω_p``."""
+    K_alphaI: float = 0.5
+    """Scale of the imitation-angle term relative to the angle weights ``ω_α``."""
+    position_points: Literal["fingertips", "palm"] = "fingertips"
+    """Actor points the position terms reward: the 5 fingertips (the paper's reward) or
+    the palm centre only (Baseline 1)."""
+    contact: bool = True
+    """Reward contacts of the required sensors (Baseline 2 turns this off)."""
+    imitation: bool = True
+    """Add the imitation terms while the episode is before the demo's closest approach."""
+
+    def __post_init__(self):
+        if self.position_points not in ("fingertips", "palm"):
+            raise ValueError(
+                f"position_points must be 'fingertips' or 'palm', got {self.position_points!r}"
+            )
+        for name in ("K_p", "K_alpha", "K_c", "K_a", "K_pI", "K_alphaI"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+
+
+_VARIANTS = {
+    "full": {},
+    "baseline1": {"position_points": "palm"},
+    "baseline2": {"contact": False},
+    "no_imitation": {"imitation": False},
+}
+
+
+def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:
+    """Named reward configuration of the paper's comparison, built on ``base``'s knobs.
+
+    ``full``: the proposed reward; ``baseline1``: palm position instead of fingertips;
+    ``baseline2``: no contact term; ``no_imitation``: no imitation terms.
+    """
+    if name not in _VARIANTS:
+        raise ValueError(f"unknown reward variant {name!r}; expected one of {', '.join(_VARIANTS)}")
+    return dataclasses.replace(base or RewardWeights(), **_VARIANTS[name])
+
+
+@struct.dataclass
+class RewardParams:
+    """Everything the reward of one demonstration needs; all leaves are arrays.
+
+    Shapes are for one demonstration; a stacked pytree (:func:`stack_params`) adds a
+    leading ``n_demos`` axis to every leaf. ``L`` is the common reference length.
+    Offsets are expressed in the frame of target body ``j_min`` (palm body for
+    ``j_min = 0``, the finger's distal body otherwise); points are ``HAND_POINTS`` rows.
+    """
+
+    j_min: jax.Array  # () int32: target point (HAND_POINTS row) of the closest approach
+    d_min: jax.Array  # () float32: closest fingertip-to-target-point distance, metres
+    t_min_frame: jax.Array  # () int32: capture frame of the closest approach (in the window)
+    t_min_step: jax.Array  # () int32: control step of t_min (last step at or before it)
+    imitation_length: jax.Array  # () int32: t_min_step + 1, valid rows of the references
+    contact_begin_step: jax.Array  # () int32: control step of demo.contact_begin
+    contact_end_step: jax.Array  # () int32: control step of demo.contact_end
+    goal_offsets: jax.Array  # (6, 3): Δp of the 6 actor points at t_min, body j_min frame
+    goal_angles: jax.Array  # (20,): actor joint angles at t_min, HAND_JOINTS order
+    ref_offsets: jax.Array  # (L, 6, 3): Δp per control step; rows >= imitation_length = t_min
+    ref_angles: jax.Array  # (L, 20): actor joint angles per control step
+    ref_palm_pos: jax.Array  # (L, 3): actor palm centre in the target palm frame
+    ref_palm_rot: jax.Array  # (L, 3, 3): actor palm orientation in the target palm frame
+    ref_target_joints: jax.Array  # (L, 20): target hand joint angles per control step
+    w_position: jax.Array  # (6,): ω_p, zero for actor points the variant does not reward
+    w_angle: jax.Array  # (20,): ω_α
+    w_contact: jax.Array  # (15,): ω_c, zero off the required sensors or without contacts
+    w_action: jax.Array  # (24,): ω_a over ARM_JOINTS + HAND_JOINTS controls
+    k_imitation_position: jax.Array  # (): K_pI, 0 when imitation is off
+    k_imitation_angle: jax.Array  # (): K_αI, 0 when imitation is off
+    required_contacts: jax.Array  # (15,) bool: sensors that define success
+
+
+def _check_demo(demo: Demonstration) -> None:
+    """Raise ValueError if ``demo`` cannot feed Algorithm 1."""
+    name = getattr(demo, "name", "?")
+    if demo.task not in REQUIRED_CONTACTS:
+        raise ValueError(
+            f"{name}: unknown task {demo.task!r}; expected one of {', '.join(REQUIRED_CONTACTS)}"
+        )
+    if not (np.isfinite(demo.fps) and demo.fps > 0):
+        raise ValueError(f"{name}: fps must be a positive number, got {demo.fps!r}")
+    n = len(demo.actor_joints)
+    shapes = {
+        "actor_joints": (n, N_JOINTS),
+        "target_joints": (n, N_JOINTS),
+        "actor_points": (n, N_POINTS, 3),
+        "actor_palm_rot": (n, 3, 3),
+        "target_points": (n, N_POINTS, 3),
+        "target_frames": (n, N_POINTS, 3, 3),
+    }
+    for field, shape in shapes.items():
+        got = np.shape(getattr(demo, field))
+        if got != shape:
+            raise ValueError(f"{name}: {field} has shape {got}, expected {shape} (T = {n})")
+    if not 0 <= demo.contact_begin <= demo.contact_end:
+        raise ValueError(
+            f"{name}: need 0 <= contact_begin <= contact_end, got "
+            f"{demo.contact_begin}, {demo.contact_end}"
+        )
+    if demo.contact_end > n - 1:
+        raise ValueError(
+            f"{name}: contact_end = {demo.contact_end} is beyond the data (T = {n} frames)"
+        )
+    for field in shapes:
+        if not np.all(np.isfinite(np.asarray(getattr(demo, field))[: demo.contact_end + 1])):
+            raise ValueError(f"{name}: {field} has non-finite values in frames 0..contact_end")
+
+
+def _offsets(demo: Demonstration, j: int) -> np.ndarray:
+    """(T, 6, 3): actor points relative to target point ``j``, in target body j's frame."""
+    rel = np.asarray(demo.actor_points, np.float64) - np.asarray(demo.target_points)[:, j, None]
+    return np.einsum("tba,tib->tia", np.asarray(demo.target_frames, np.float64)[:, j], rel)
+
+
+def closest_approach(demo: Demonstration) -> tuple[int, int, int, float]:
+    """Steps 1-2 of Algorithm 1: ``(t_min, i_min, j_min, d_min)``.
+
+    ``i_min`` is the actor fingertip as a ``HAND_POINTS`` row (1..5), ``j_min`` the target
+    ``HAND_POINTS`` row, ``t_min`` a frame in ``[contact_begin, contact_end]``; ties go to the
+    earliest frame, then the lowest rows.
+    """
+    _check_demo(demo)
+    window = slice(demo.contact_begin, demo.contact_end + 1)
+    tips = np.asarray(demo.actor_points, np.float64)[window, _TIPS]  # (t, 5, 3)
+    targets = np.asarray(demo.target_points, np.float64)[window]  # (t, 6, 3)
+    d = np.linalg.norm(tips[:, :, None] - targets[:, None], axis=-1)  # (t, 5, 6)
+    t, i, j = np.unravel_index(np.argmin(d), d.shape)
+    return int(t) + demo.contact_begin, int(i) + 1, int(j), float(d[t, i, j])
+
+
+def frames_per_step(demo: Demonstration, dt: float) -> float:
+    """Capture frames per control step, ``fps·dt``."""
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    return float(demo.fps) * dt
+
+
+def step_of_frame(frame: int, frames_per_step: float) -> int:
+    """The last control step at or before capture frame ``frame``."""
+    # The epsilon keeps exact multiples (e.g. 24 / 4.8) from rounding down a step.
+    return int(np.floor(frame / frames_per_step + 1e-9))
+
+
+def imitation_length(demo: Demonstration, dt: float = CONTROL_DT) -> int:
+    """Number of control steps from the window's start up to and including ``t_min``."""
+    return step_of_frame(closest_approach(demo)[0], frames_per_step(demo, dt)) + 1
+
+
+def _resample(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``x`` (T, ...) at fractional ``frames`` (K,) -> (K, ...)."""
+    lo = np.floor(frames).astype(int)
+    hi = np.minimum(lo + 1, len(x) - 1)
+    s = (frames - lo).reshape((-1,) + (1,) * (x.ndim - 1))
+    return (1 - s) * x[lo] + s * x[hi]
+
+
+def _nearest_rotation(m: np.ndarray) -> np.ndarray:
+    """Project (..., 3, 3) matrices onto SO(3): interpolated rotations are not rotations."""
+    u, _, vt = np.linalg.svd(m)
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u.copy()
+    u[..., :, -1] *= d[..., None]
+    return u @ vt
+
+
+def algorithm1(
+    demo: Demonstration,
+    weights: RewardWeights = RewardWeights(),
+    dt: float = CONTROL_DT,
+    length: int | None = None,
+) -> RewardParams:
+    """Reward parameters of one demonstration (NumPy leaves, float32 / int32 / bool).
+
+    Args:
+      demo: the demonstration, frames ``0..T-1`` of its window.
+      weights: knobs and variant switches.
+      dt: control period, seconds.
+      length: rows ``L`` of the per-step references; default ``imitation_length``.
+        Rows past ``t_min_step`` hold the values at frame ``t_min`` (padding).
+    """
+    t_min, _, j_min, d_min = closest_approach(demo)
+    r = frames_per_step(demo, dt)
+    t_min_step = step_of_frame(t_min, r)
+    n_valid = t_min_step + 1
+    length = n_valid if length is None else int(length)
+    if length < n_valid:
+        raise ValueError(
+            f"{demo.name}: length {length} is shorter than the imitation length {n_valid}"
+        )
+
+    offsets = _offsets(demo, j_min)  # (T, 6, 3)
+    frames = np.minimum(np.arange(length) * r, t_min)  # clamping pads with the t_min value
+
+    d_goal = np.linalg.norm(offsets[t_min], axis=-1)  # (6,) = d^{i j_min}_{t_min}
+    if weights.position_points == "fingertips":
+        selected = np.arange(1, N_POINTS)
+    else:
+        selected = np.array([0])
+    # Normalise by the closest *selected* point: d_min for fingertips, the palm itself
+    # for Baseline 1, so that the rewarded point nearest to the target weighs K_p.
+    floored = np.maximum(d_goal, DISTANCE_FLOOR)
+    w_position = np.zeros(N_POINTS)
+    w_position[selected] = weights.K_p * floored[selected].min() / floored[selected]
+
+    required = required_contact_mask(demo.task)
+    f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
+    i32 = lambda x: np.asarray(x, np.int32)  # noqa: E731
+    return RewardParams(
+        j_min=i32(j_min),
+        d_min=f32(d_min),
+        t_min_frame=i32(t_min),
+        t_min_step=i32(t_min_step),
+        imitation_length=i32(n_valid),
+        contact_begin_step=i32(step_of_frame(demo.contact_begin, r)),
+        contact_end_step=i32(step_of_frame(demo.contact_end, r)),
+        goal_offsets=f32(offsets[t_min]),
+        goal_angles=f32(demo.actor_joints[t_min]),
+        ref_offsets=f32(_resample(offsets, frames)),
+        ref_angles=f32(_resample(np.asarray(demo.actor_joints, np.float64), frames)),
+        ref_palm_pos=f32(_resample(np.asarray(demo.actor_points, np.float64)[:, 0], frames)),
+        ref_palm_rot=f32(
+            _nearest_rotation(_resample(np.asarray(demo.actor_palm_rot, np.float64), frames))
+        ),
+        ref_target_joints=f32(_resample(np.asarray(demo.target_joints, np.float64), frames)),
+        w_position=f32(w_position),
+        w_angle=f32(np.full(N_JOINTS, weights.K_alpha)),
+        w_contact=f32(required * weights.K_c if weights.contact else np.zeros(N_SENSORS)),
+        w_action=f32(np.full(N_CONTROLS, weights.K_a)),
+        k_imitation_position=f32(weights.K_pI if weights.imitation else 0.0),
+        k_imitation_angle=f32(weights.K_alphaI if weights.imitation else 0.0),
+        required_contacts=required,
+    )
+
+
+def stack_params(params: Sequence[RewardParams]) -> RewardParams:
+    """Stack single-demo params into one pytree with a leading ``n_demos`` axis.
+
+    All must share the reference length ``L``: build them with a common ``length``
+    (as :func:`build_task_params` does).
+    """
+    params = list(params)
+    if not params:
+        raise ValueError("stack_params needs at least one RewardParams")
+    lengths = {np.shape(p.ref_angles)[0] for p in params}
+    if len(lengths) > 1:
+        raise ValueError(
+            f"reference lengths differ ({sorted(lengths)}); pass a common `length` to "
+            "algorithm1 or use build_task_params"
+        )
+    return jax.tree.map(lambda *xs: np.stack(xs), *params)
+
+
+def build_task_params(
+    demos: Sequence[Demonstration],
+    weights: RewardWeights = RewardWeights(),
+    dt: float = CONTROL_DT,
+) -> RewardParams:
+    """Algorithm 1 for every demonstration of one task, stacked, as ``jax.Array`` leaves.
+
+    Select demo ``i`` inside jit with ``jax.tree.map(lambda x: x[i], params)``.
+    """
+    demos = list(demos)
+    if not demos:
+        raise ValueError("build_task_params needs at least one demonstration")
+    tasks = sorted({d.task for d in demos})
+    if len(tasks) > 1:
+        raise ValueError(f"demonstrations of one task expected, got tasks {tasks}")
+    length = max(imitation_length(d, dt) for d in demos)
+    stacked = stack_params([algorithm1(d, weights, dt, length) for d in demos])
+    return jax.tree.map(jnp.asarray, stacked)
