@@ -79,17 +79,33 @@ def make_chain(model: mujoco.MjModel, site: str) -> Chain:
     )
 
 
+def _hinge_rotation(axis: np.ndarray, angle: jnp.ndarray) -> jnp.ndarray:
+    """Rodrigues: rotation by ``angle`` about the constant unit ``axis``. -> (3, 3)"""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + jnp.sin(angle) * k + (1.0 - jnp.cos(angle)) * (k @ k)
+
+
 def forward(chain: Chain, q: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """End-frame pose for chain joint values q: (n_joints,) -> pos (3,), rot (3, 3)."""
+    """End-frame pose for chain joint values q: (n_joints,) -> pos (3,), rot (3, 3).
+
+    Rotation matrices rather than quaternions: matrix products are fusion boundaries
+    for XLA, whereas a chain of stacked quaternion products fuses into one loop that
+    recomputes its producers per element -- exponentially slow in the chain length.
+    """
     pos = jnp.zeros(3)
-    quat = jnp.array([1.0, 0.0, 0.0, 0.0])
+    rot = jnp.eye(3)
     for i, ids in enumerate(chain.joints):
-        pos = pos + spatial.quat_to_mat(quat) @ chain.body_pos[i]
-        quat = spatial.quat_mul(quat, jnp.asarray(chain.body_quat[i]))
+        pos = pos + rot @ chain.body_pos[i]
+        rot = rot @ _quat_to_mat_np(chain.body_quat[i])
         for j in ids:  # MuJoCo applies a body's joints in order, each about its own axis
-            quat = spatial.quat_mul(quat, spatial.axis_angle_quat(jnp.asarray(chain.axes[j]), q[j]))
-    rot = spatial.quat_to_mat(quat)
+            rot = rot @ _hinge_rotation(chain.axes[j], q[j])
     return pos + rot @ chain.end_pos, rot
+
+
+def _quat_to_mat_np(quat: np.ndarray) -> np.ndarray:
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, np.float64))
+    return mat.reshape(3, 3)
 
 
 def solve(

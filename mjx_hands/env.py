@@ -1,0 +1,545 @@
+"""The hand-interaction environment: Brax ``Env`` API over the MJX hand-pair scene.
+
+``reset(rng) -> State`` and ``step(State, action) -> State`` are pure and act on a
+single environment; :func:`make_env` returns it wrapped so that both take and
+return a batch (``jax.vmap``) and finished episodes restart with fresh
+randomisation (see :class:`BatchedEnv`).
+
+Episode randomisation (the paper's training method):
+
+* a demonstration of the task, uniformly at random;
+* the target palm position uniformly in a box around its nominal position; the
+  target's orientation is the task's nominal one (both from :func:`place_target`);
+* the target's finger angles from the demonstration at a control step drawn
+  uniformly between the start step and ``t_min``;
+* the start step ``t_s`` uniformly in ``[1, t_min - t_off]``: the agent's palm is
+  put at the actor's palm pose of that step (plus Gaussian noise) by inverse
+  kinematics of the arm and wrist, the fingers at the actor's angles (plus noise),
+  and the imitation reference runs from there.
+
+Observation (``observation_size`` = 145), in this order:
+
+====================  ====  ================================================
+agent qpos            28    arm (4) + hand joints (24), radians
+agent qvel            28    scaled by 0.1
+contacts              15    ``CONTACT_SENSORS`` readings, 0/1
+agent points          18    palm + fingertips minus target palm centre (world axes)
+goal offset           18    goal minus current point, per hand point
+imitation offset      18    imitation reference minus current point (0 past t_min)
+target points         18    target palm + fingertips minus agent palm centre
+phase                  2    step / episode length, imitation-active flag
+====================  ====  ================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from brax.envs.base import Env, State
+from flax import struct
+from mujoco import mjx
+
+from mjx_hands import ik, mocap, reward_params, rewards, scene, spatial
+from mjx_hands import shadow_hand as sh
+
+TASKS = ("handshake", "handclap", "et")
+EPISODE_LENGTH = {"handshake": 100, "handclap": 75, "et": 75}
+
+# Agent palm orientation at the demonstrated contact, per task: columns are the palm
+# body's x (thumb side), y (back of the hand) and z (fingers) axes in the world. The
+# agent stands at the origin facing +x; at zero arm angles its palm faces +y with
+# the thumb up (the handshake and clap pose); for E.T. the palm faces down.
+AGENT_CONTACT_ROTATIONS = {
+    "handshake": np.array([[0, 0, 1], [0, -1, 0], [1, 0, 0]], np.float64),
+    "handclap": np.array([[0, 0, 1], [0, -1, 0], [1, 0, 0]], np.float64),
+    "et": np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], np.float64),
+}
+
+
+# IK starting posture (arm joints, then WRJ1, WRJ0): elbow bent, away from the
+# stretched-arm singularity where reaching closer to the shoulder has no gradient.
+IK_SEED = np.array([0.0, 0.0, 0.0, 1.2, 0.0, 0.0], np.float32)
+
+
+def place_target(
+    params: reward_params.RewardParams, task: str, contact_point: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World pose of the target palm that puts the demonstrated contact in front of the agent.
+
+    The demonstrations say where the actor's palm is relative to the target palm at
+    the closest approach t_min. Averaged over the task's demonstrations, that pose is
+    mapped onto a comfortable agent palm pose (``AGENT_CONTACT_ROTATIONS`` at
+    ``contact_point``); the inverse of that map places the target.
+
+    Returns:
+      position (3,) of the target palm centre and rotation (3, 3), world.
+    """
+    t_min = np.asarray(params.t_min_step)
+    demos = np.arange(t_min.shape[0])
+    actor_rot = np.asarray(params.ref_palm_rot)[demos, t_min].mean(axis=0)
+    u, _, vt = np.linalg.svd(actor_rot)  # chordal mean: nearest rotation to the average
+    actor_rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    actor_pos = np.asarray(params.ref_palm_pos)[demos, t_min].mean(axis=0)
+    rot = AGENT_CONTACT_ROTATIONS[task] @ actor_rot.T
+    return np.asarray(contact_point) - rot @ actor_pos, rot
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Everything that defines an environment instance (all static under jit)."""
+
+    task: str = "handshake"
+    """Interaction: 'handshake', 'handclap' or 'et'."""
+    reward: str = "full"
+    """Reward variant: 'full', 'baseline1' (palm position), 'baseline2' (no contact),
+    'no_imitation'."""
+    weights: reward_params.RewardWeights | None = None
+    """The six reward knobs; None takes the variant's defaults."""
+    mocap_source: str = "auto"
+    """'optitrack' (the authors' recordings), 'synthetic' (mocap_data/) or 'auto'."""
+    mocap_path: str | None = None
+    """Folder of the demonstrations; None uses the source's default location."""
+    control_dt: float = 0.04
+    """Control period, seconds (a multiple of the physics timestep)."""
+    episode_length: int | None = None
+    """Control steps per episode; None takes the paper's (100 handshake, 75 otherwise)."""
+    contact_point: tuple[float, float, float] = (0.45, 0.0, 0.0)
+    """Where the agent's palm centre is at the demonstrated contact when the target is
+    at its nominal pose (world, metres; the shoulder is at the origin)."""
+    target_box: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    """Half-extent of the uniform box of target palm positions, metres."""
+    start_offset_steps: int = 5
+    """t_off: the latest start step is t_min - t_off (control steps)."""
+    start_position_noise: float = 0.02
+    """Std of the Gaussian noise on the starting palm position, metres."""
+    start_joint_noise: float = 0.05
+    """Std of the Gaussian noise on the starting finger angles, radians."""
+    contact_distance: float = 0.002
+    """A sensor reads 1 when one of its geoms is closer than this to the target, metres."""
+    ik_iterations: int = 30
+    """Damped least-squares iterations placing the arm at the start pose."""
+    scene: scene.SceneConfig = scene.SceneConfig()
+    """Physics settings."""
+
+
+@struct.dataclass
+class EpisodeInfo:
+    """Per-episode constants and counters kept in ``State.info['episode']``.
+
+    Shapes are for one environment.
+    """
+
+    rng: jax.Array  # (2,) key for the next episode's randomisation
+    demo: jax.Array  # () index of the demonstration
+    start_step: jax.Array  # () t_s, control step of the demonstration at reset
+    step: jax.Array  # () control steps taken in this episode
+    target_pos: jax.Array  # (3,) target palm centre, world
+    target_rot: jax.Array  # (3, 3) target palm orientation, world
+    target_points: jax.Array  # (6, 3) target palm centre + fingertips, world
+    target_frames: jax.Array  # (6, 3, 3) target palm + distal bodies, body-to-world
+    goal_points: jax.Array  # (6, 3) goal palm + fingertips, world
+
+
+class HandInteractionEnv(Env):
+    """One environment of a hand interaction task (single, unbatched)."""
+
+    def __init__(self, config: EnvConfig = EnvConfig()):
+        if config.task not in TASKS:
+            raise ValueError(f"unknown task {config.task!r}; expected one of {', '.join(TASKS)}")
+        self.config = config
+        self.episode_length = config.episode_length or EPISODE_LENGTH[config.task]
+        self.mj_model = scene.build_model(config.scene)
+        self.mjx_model = mjx.put_model(self.mj_model)
+        self.n_substeps = int(round(config.control_dt / config.scene.timestep))
+        if abs(self.n_substeps * config.scene.timestep - config.control_dt) > 1e-9:
+            raise ValueError(
+                f"control_dt={config.control_dt} is not a multiple of the physics timestep "
+                f"{config.scene.timestep}"
+            )
+        weights = config.weights or reward_params.variant(config.reward)
+        self.weights = weights
+        self.demos = mocap.load_demonstrations(
+            config.task, source=config.mocap_source, path=config.mocap_path
+        )
+        self.params = reward_params.build_task_params(self.demos, weights, config.control_dt)
+        self._init_static_indices()
+        self._init_target_tables()
+
+    # ------------------------------------------------------------------ setup
+    def _init_static_indices(self) -> None:
+        m = self.mj_model
+        name = lambda n: scene.AGENT + sh.hand_name(n)
+        self.tip_sites = np.array([m.site(name(f"S_{t}")).id for t in sh.FINGERTIPS])
+        self.palm_site = m.site(scene.AGENT + "palm_center").id
+        self.target_palm_site = m.site(scene.TARGET + "palm_center").id
+        arm_qadr = [m.joint(scene.AGENT + j).qposadr[0] for j in sh.ARM_JOINTS]
+        hand_qadr = [m.joint(name(j)).qposadr[0] for j in sh.HAND_JOINTS]
+        self.actuated_qadr = np.array(arm_qadr + hand_qadr)
+        self.hand_qadr = np.array(hand_qadr)
+        self.ctrl_lo, self.ctrl_hi = m.actuator_ctrlrange[:, 0].copy(), m.actuator_ctrlrange[:, 1].copy()
+        self.jnt_lo, self.jnt_hi = m.jnt_range[:, 0].copy(), m.jnt_range[:, 1].copy()
+        self.chain = ik.make_chain(m, scene.AGENT + "palm_center")
+        # Contact sensor of each geom (-1: none); a contact lights the sensor of its agent geom.
+        sensor_of_geom = -np.ones(m.ngeom, np.int32)
+        for s, (finger, phalanx) in enumerate(
+            (f, p) for f in sh.FINGERS for p in sh.PHALANGES
+        ):
+            body = m.body(scene.AGENT + sh.hand_name(sh.PHALANX_BODY[(finger, phalanx)])).id
+            sensor_of_geom[(m.geom_bodyid == body) & (m.geom_contype == 0) & (m.geom_group == 4)] = s
+        self.sensor_of_geom = sensor_of_geom
+        self.target_mocap = np.array(
+            [m.body_mocapid[m.body(scene.TARGET + link).id] for link in scene.TARGET_LINKS]
+        )
+        # Distal-coupled joints follow their J1 in the start posture.
+        self.coupled = np.array(
+            [
+                (m.joint(name(d)).qposadr[0], m.joint(name(p)).qposadr[0])
+                for d, p in sh.COUPLED_DISTAL_JOINTS.items()
+            ]
+        )
+
+    def _init_target_tables(self) -> None:
+        """Target-hand poses in the palm frame for every demo and control step."""
+        joints = np.asarray(self.params.ref_target_joints)  # (n_demos, L, 20)
+        n, length = joints.shape[:2]
+        poses = scene.target_poses(joints.reshape(n * length, 20))
+        reshape = lambda x: jnp.asarray(x.reshape((n, length) + x.shape[1:]), jnp.float32)
+        self.link_pos = reshape(poses.link_pos)
+        self.link_quat = reshape(poses.link_quat)
+        self.point_pos = reshape(poses.point_pos)
+        self.point_rot = reshape(poses.point_rot)
+        center, rot = place_target(self.params, self.config.task, self.config.contact_point)
+        self.target_center = jnp.asarray(center, jnp.float32)
+        self.target_rot = jnp.asarray(rot, jnp.float32)
+        self.target_quat = jnp.asarray(_rot_to_quat(rot), jnp.float32)
+
+    # ----------------------------------------------------------- Brax Env API
+    @property
+    def observation_size(self) -> int:
+        state = jax.eval_shape(self.reset, jax.random.PRNGKey(0))
+        return state.obs.shape[-1]
+
+    @property
+    def action_size(self) -> int:
+        return self.mj_model.nu
+
+    @property
+    def backend(self) -> str:
+        return "mjx"
+
+    def reset(self, rng: jax.Array) -> State:
+        """Start an episode with the paper's randomisation. rng: (2,) key."""
+        rng, k_demo, k_start, k_frame, k_box, k_pos, k_joint = jax.random.split(rng, 7)
+        p = self.params
+        demo = jax.random.randint(k_demo, (), 0, p.t_min_step.shape[0])
+        t_min = p.t_min_step[demo]
+        latest = jnp.maximum(t_min - self.config.start_offset_steps, 1)
+        start = jax.random.randint(k_start, (), 1, latest + 1)
+        frame = jax.random.randint(k_frame, (), start, jnp.maximum(t_min, start) + 1)
+
+        box = jnp.asarray(self.config.target_box)
+        target_pos = self.target_center + jax.random.uniform(
+            k_box, (3,), minval=-box, maxval=box
+        )
+        target_rot = self.target_rot
+        to_world = lambda x: target_pos + x @ target_rot.T
+        link_pos = to_world(self.link_pos[demo, frame])
+        link_quat = spatial.quat_mul(self.target_quat, self.link_quat[demo, frame])
+        target_points = to_world(self.point_pos[demo, frame])
+        target_frames = target_rot @ self.point_rot[demo, frame]
+        goal_points = rewards.goal_positions(
+            target_points, target_frames, p.j_min[demo], p.goal_offsets[demo]
+        )
+
+        palm_goal = to_world(p.ref_palm_pos[demo, start])
+        palm_goal = palm_goal + self.config.start_position_noise * jax.random.normal(k_pos, (3,))
+        palm_rot = target_rot @ p.ref_palm_rot[demo, start]
+        arm_q = ik.solve(
+            self.chain, palm_goal, palm_rot, IK_SEED, iterations=self.config.ik_iterations
+        )
+        fingers = p.ref_angles[demo, start]
+        fingers = fingers + self.config.start_joint_noise * jax.random.normal(k_joint, (20,))
+
+        qpos = jnp.zeros(self.mj_model.nq)
+        qpos = qpos.at[self.chain.qpos_adr].set(arm_q)
+        qpos = qpos.at[self.hand_qadr[2:]].set(fingers[2:])  # wrist comes from the IK
+        qpos = qpos.at[self.coupled[:, 0]].set(qpos[self.coupled[:, 1]] * sh.DISTAL_COUPLING)
+        qpos = jnp.clip(qpos, self.jnt_lo, self.jnt_hi)
+
+        data = mjx.make_data(self.mjx_model)
+        mocap_pos = data.mocap_pos.at[self.target_mocap].set(link_pos)
+        mocap_quat = data.mocap_quat.at[self.target_mocap].set(link_quat)
+        data = data.replace(
+            qpos=qpos, ctrl=qpos[self.actuated_qadr], mocap_pos=mocap_pos, mocap_quat=mocap_quat
+        )
+        data = mjx.forward(self.mjx_model, data)
+
+        episode = EpisodeInfo(
+            rng=rng,
+            demo=demo,
+            start_step=start,
+            step=jnp.zeros((), jnp.int32),
+            target_pos=target_pos,
+            target_rot=target_rot,
+            target_points=target_points,
+            target_frames=target_frames,
+            goal_points=goal_points,
+        )
+        features = self._features(data, episode)
+        zero = jnp.zeros(())
+        terms = {k: zero for k in rewards.TERMS + ("total",)}
+        metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero}
+        return State(
+            pipeline_state=data,
+            obs=self._observation(features, episode),
+            reward=zero,
+            done=zero,
+            metrics=metrics,
+            info={"episode": episode, "truncation": zero, "success": zero},
+        )
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """Advance one control period. action: (24,) in [-1, 1]."""
+        action = jnp.clip(action, -1.0, 1.0)
+        ctrl = self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
+        data = state.pipeline_state.replace(ctrl=ctrl)
+        data = jax.lax.fori_loop(
+            0, self.n_substeps, lambda _, d: mjx.step(self.mjx_model, d), data
+        )
+        episode = state.info["episode"]
+        episode = episode.replace(step=episode.step + 1)
+        features = self._features(data, episode)
+
+        p = jax.tree.map(lambda x: x[episode.demo], self.params)
+        terms = rewards.compute_rewards(
+            p,
+            episode.start_step + episode.step,
+            hand_points=features["points"],
+            target_points=episode.target_points,
+            target_frames=episode.target_frames,
+            hand_angles=features["hand_angles"],
+            contacts=features["contacts"],
+            action=action,
+        )
+        success = rewards.success(features["contacts"], p.required_contacts).astype(jnp.float32)
+
+        finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
+        truncated = episode.step >= self.episode_length
+        done = jnp.where(finite, truncated, True).astype(jnp.float32)
+        # A diverged simulation ends its episode; its numbers must not reach the learner.
+        obs = jnp.where(finite, self._observation(features, episode), 0.0)
+        reward = jnp.where(finite, terms["total"], 0.0)
+        metrics = {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
+        metrics["success"] = success
+        info = dict(state.info)
+        info.update(
+            episode=episode,
+            truncation=jnp.where(finite, truncated, False).astype(jnp.float32),
+            success=success,
+        )
+        return state.replace(
+            pipeline_state=data, obs=obs, reward=reward, done=done, metrics=metrics, info=info
+        )
+
+    # --------------------------------------------------------------- features
+    def _features(self, data: mjx.Data, episode: EpisodeInfo) -> dict[str, jax.Array]:
+        """Everything the reward and the observation read from the simulation."""
+        points = jnp.concatenate(
+            [data.site_xpos[self.palm_site][None], data.site_xpos[self.tip_sites]], axis=0
+        )
+        p = jax.tree.map(lambda x: x[episode.demo], self.params)
+        offsets, _, imitation_active = rewards.reference_at(p, episode.start_step + episode.step)
+        imitation_points = rewards.goal_positions(
+            episode.target_points, episode.target_frames, p.j_min, offsets
+        )
+        return {
+            "qpos": data.qpos,
+            "qvel": data.qvel,
+            "points": points,
+            "hand_angles": data.qpos[self.hand_qadr],
+            "contacts": self._contacts(data),
+            "imitation_points": imitation_points,
+            "imitation_active": imitation_active.astype(jnp.float32),
+        }
+
+    def _contacts(self, data: mjx.Data) -> jax.Array:
+        """The 15 contact-sensor readings (0/1) from MJX contact data. -> (15,)"""
+        contact = data._impl.contact
+        geom_sensor = jnp.asarray(self.sensor_of_geom)[contact.geom]  # (ncon, 2)
+        sensor = jnp.max(geom_sensor, axis=-1)  # the agent geom's sensor; target geoms are -1
+        touching = contact.dist < self.config.contact_distance
+        hits = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS)) * touching[:, None]
+        return jnp.max(hits, axis=0, initial=0.0)
+
+    def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
+        relative_points = f["points"] - episode.target_pos
+        phase = jnp.stack(
+            [episode.step / self.episode_length, f["imitation_active"]]
+        ).astype(jnp.float32)
+        return jnp.concatenate(
+            [
+                f["qpos"],
+                0.1 * f["qvel"],
+                f["contacts"],
+                relative_points.reshape(-1),
+                (episode.goal_points - f["points"]).reshape(-1),
+                ((f["imitation_points"] - f["points"]) * f["imitation_active"]).reshape(-1),
+                (episode.target_points - f["points"][0]).reshape(-1),
+                phase,
+            ]
+        )
+
+
+def _rot_to_quat(rot: np.ndarray) -> np.ndarray:
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.asarray(rot, np.float64).reshape(9))
+    return quat
+
+
+class BatchedEnv(Env):
+    """A batch of environments with automatic restarts.
+
+    ``reset`` takes one key and returns a batched ``State``; ``step`` takes and
+    returns batched states. An environment whose episode ended starts a new one with
+    fresh randomisation (its own stored key) inside ``step``; the returned state
+    keeps the finished step's ``reward``, ``done`` and ``metrics`` and stores its
+    final observation in ``info['terminal_obs']`` so a learner can bootstrap
+    truncated episodes from the true last observation.
+
+    Episodes have a fixed length and start together, so they end together: the
+    (comparatively costly) reset with its IK runs under ``lax.cond`` only on steps
+    where at least one environment finished.
+    """
+
+    def __init__(self, env: HandInteractionEnv, num_envs: int):
+        self.env = env
+        self.num_envs = num_envs
+
+    @property
+    def observation_size(self) -> int:
+        return self.env.observation_size
+
+    @property
+    def action_size(self) -> int:
+        return self.env.action_size
+
+    @property
+    def backend(self) -> str:
+        return self.env.backend
+
+    @property
+    def unwrapped(self) -> HandInteractionEnv:
+        return self.env
+
+    def reset(self, rng: jax.Array) -> State:
+        """rng: (2,) -> State with leading axis num_envs."""
+        state = jax.vmap(self.env.reset)(jax.random.split(rng, self.num_envs))
+        state.info["terminal_obs"] = state.obs
+        return state
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """state: batched State; action: (num_envs, 24)."""
+        state = jax.vmap(self.env.step)(state, action)
+        state.info["terminal_obs"] = state.obs
+
+        def restart(state: State) -> State:
+            fresh = jax.vmap(self.env.reset)(state.info["episode"].rng)
+            done = state.done > 0
+
+            def pick(new, old):
+                return jnp.where(done.reshape(done.shape + (1,) * (old.ndim - 1)), new, old)
+
+            info = dict(state.info)
+            info["episode"] = jax.tree.map(pick, fresh.info["episode"], state.info["episode"])
+            return state.replace(
+                pipeline_state=jax.tree.map(pick, fresh.pipeline_state, state.pipeline_state),
+                obs=pick(fresh.obs, state.obs),
+                info=info,
+            )
+
+        return jax.lax.cond(jnp.any(state.done > 0), restart, lambda s: s, state)
+
+
+def make_env(task: str = "handshake", num_envs: int | None = None, **overrides: Any):
+    """An environment of ``task`` ('handshake', 'handclap', 'et').
+
+    Args:
+      num_envs: None for a single environment, else a :class:`BatchedEnv` of that size.
+      **overrides: fields of :class:`EnvConfig` (e.g. ``reward='baseline1'``).
+    """
+    fields = {f.name for f in dataclasses.fields(EnvConfig)}
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise TypeError(f"unknown EnvConfig field(s) {unknown}; valid: {sorted(fields)}")
+    env = HandInteractionEnv(EnvConfig(task=task, **overrides))
+    return env if num_envs is None else BatchedEnv(env, num_envs)
+
+
+def model_sizes(env: HandInteractionEnv) -> dict[str, int]:
+    """Sizes that drive MJX cost: DoFs, actuators, contacts and constraint rows."""
+    m = env.mj_model
+    data = mjx.make_data(env.mjx_model)
+    return {
+        "nq": m.nq,
+        "nv": m.nv,
+        "nu": m.nu,
+        "nmocap": m.nmocap,
+        "ngeom": m.ngeom,
+        "contact_pairs": m.npair,
+        "equality_rows": m.neq,
+        "max_contacts": int(data._impl.contact.dist.shape[0]),
+        "constraint_rows": int(data._impl.efc_J.shape[0]),
+        "substeps": env.n_substeps,
+    }
+
+
+def _main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        description="Build a task environment, print its model sizes and time random steps."
+    )
+    parser.add_argument("--task", default="handshake", choices=TASKS)
+    parser.add_argument("--num-envs", type=int, default=128, help="batch size")
+    parser.add_argument("--steps", type=int, default=20, help="timed control steps")
+    parser.add_argument("--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic"))
+    args = parser.parse_args()
+
+    env = make_env(args.task, num_envs=args.num_envs, mocap_source=args.mocap_source)
+    single = env.unwrapped
+    print(f"task {args.task}: {len(single.demos)} demonstrations ({single.demos[0].source})")
+    for key, value in model_sizes(single).items():
+        print(f"  {key:16s} {value}")
+    print(f"  observation_size {env.observation_size}, action_size {env.action_size}")
+
+    reset, step = jax.jit(env.reset), jax.jit(env.step)
+    key = jax.random.PRNGKey(0)
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(reset(key))
+    t_reset = time.perf_counter() - t0
+    actions = jax.random.uniform(key, (args.steps, args.num_envs, env.action_size), minval=-1.0)
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(step(state, actions[0]))
+    t_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for a in actions[1:]:
+        state = step(state, a)
+    jax.block_until_ready(state)
+    elapsed = time.perf_counter() - t0
+    n = (args.steps - 1) * args.num_envs
+    print(f"  reset (compile+run) {t_reset:.1f} s, first step (compile+run) {t_compile:.1f} s")
+    print(
+        f"  batch {args.num_envs}: {n / elapsed:,.0f} control steps/s, "
+        f"{n * single.n_substeps / elapsed:,.0f} physics steps/s on {jax.devices()[0].platform}"
+    )
+
+
+if __name__ == "__main__":
+    _main()

@@ -1,0 +1,39 @@
+"""Shared, session-scoped compiled functions: MJX compiles take ~30 s each on 2 cores."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+# Keep XLA from spawning more compile/compute threads than CI's 2 cores serve well.
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=true")
+
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "mocap" / "drl_handshake"
+
+
+def real_data_or_skip() -> Path:
+    """Path of the authors' recordings, or skip when this checkout has none beside it."""
+    if not (REAL_DATA / "handshake_interaction_t.npy").is_file():
+        pytest.skip(f"real mocap data not found at {REAL_DATA}")
+    return REAL_DATA
+
+
+@pytest.fixture(scope="session")
+def handshake_env():
+    """A batched handshake env (project's synthetic demos) with jitted reset/step."""
+    import jax
+
+    from mjx_hands import env as env_lib
+
+    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic")
+    return env, jax.jit(env.reset), jax.jit(env.step)
+
+
+@pytest.fixture(scope="session")
+def reset_state(handshake_env):
+    import jax
+
+    env, reset, _ = handshake_env
+    return reset(jax.random.PRNGKey(42))

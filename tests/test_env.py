@@ -1,0 +1,182 @@
+"""The batched environment: randomisation, long batched rollouts, contact sensors, and
+agreement of MJX with native MuJoCo on the same model."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from mujoco import mjx
+
+from mjx_hands import env as env_lib
+from mjx_hands import scene
+from mjx_hands import shadow_hand as sh
+
+
+def _one(tree, i=0):
+    return jax.tree.map(lambda x: x[i], tree)
+
+
+def test_make_env_rejects_unknown_task_and_fields():
+    with pytest.raises(ValueError, match="unknown task 'wave'.*handshake"):
+        env_lib.make_env("wave")
+    with pytest.raises(TypeError, match="unknown EnvConfig field"):
+        env_lib.make_env("handshake", num_env=3)
+
+
+def test_reset_randomises_what_it_should(handshake_env, reset_state):
+    env, reset, _ = handshake_env
+    single = env.unwrapped
+    ep = reset_state.info["episode"]
+    n = env.num_envs
+    assert reset_state.obs.shape == (n, env.observation_size)
+    # Demonstrations drawn from several, target positions inside the box and spread.
+    assert len(np.unique(np.asarray(ep.demo))) >= min(3, len(single.demos))
+    center = np.asarray(single.target_center)
+    box = np.asarray(single.config.target_box)
+    target = np.asarray(ep.target_pos)
+    assert np.all(np.abs(target - center) <= box + 1e-6)
+    assert np.all(target.std(axis=0) > box / 4)
+    # The target hand's mocap palm sits where the episode says.
+    palm_site = np.asarray(reset_state.pipeline_state.site_xpos[:, single.target_palm_site])
+    np.testing.assert_allclose(palm_site, target, atol=1e-5)
+    # Start steps inside [1, t_min - t_off].
+    t_min = np.asarray(single.params.t_min_step)[np.asarray(ep.demo)]
+    start = np.asarray(ep.start_step)
+    assert np.all(start >= 1)
+    assert np.all(start <= np.maximum(t_min - single.config.start_offset_steps, 1))
+    assert len(np.unique(start)) > 3
+    # The agent's palm starts near the actor's palm of the start step (noise 2 cm + IK).
+    p = single.params
+    rot = np.asarray(ep.target_rot)
+    want = target + np.einsum(
+        "nij,nj->ni", rot, np.asarray(p.ref_palm_pos)[np.asarray(ep.demo), start]
+    )
+    got = np.asarray(reset_state.pipeline_state.site_xpos[:, single.palm_site])
+    assert np.median(np.linalg.norm(got - want, axis=-1)) < 0.06
+    # Same key, same episode; another key, another one.
+    again = reset(jax.random.PRNGKey(42))
+    np.testing.assert_array_equal(np.asarray(again.obs), np.asarray(reset_state.obs))
+    other = reset(jax.random.PRNGKey(7))
+    assert not np.allclose(np.asarray(other.info["episode"].target_pos), target)
+
+
+def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_state):
+    env, _, step = handshake_env
+    length = env.unwrapped.episode_length
+    assert length == 100
+    state = reset_state
+    key = jax.random.PRNGKey(0)
+    first_demo = np.asarray(state.info["episode"].demo)
+    for t in range(length):
+        key, sub = jax.random.split(key)
+        action = jax.random.uniform(sub, (env.num_envs, env.action_size), minval=-1.0, maxval=1.0)
+        state = step(state, action)
+        if t < length - 1:
+            assert not np.any(np.asarray(state.done))
+    assert np.all(np.isfinite(np.asarray(state.obs)))
+    assert np.all(np.isfinite(np.asarray(state.reward)))
+    assert np.all(np.isfinite(np.asarray(state.pipeline_state.qpos)))
+    # The 100th step ends every episode by truncation, and each env restarted.
+    assert np.all(np.asarray(state.done) == 1)
+    assert np.all(np.asarray(state.info["truncation"]) == 1)
+    assert np.all(np.asarray(state.info["episode"].step) == 0)
+    assert not np.array_equal(np.asarray(state.info["episode"].demo), first_demo) or (
+        len(env.unwrapped.demos) == 1
+    )
+    for name in ("position", "angle", "contact", "action", "total"):
+        assert f"reward/{name}" in state.metrics
+
+
+@pytest.fixture(scope="module")
+def forward_and_contacts(handshake_env):
+    env, _, _ = handshake_env
+    single = env.unwrapped
+
+    @jax.jit
+    def run(data):
+        data = mjx.forward(single.mjx_model, data)
+        return data, single._contacts(data)
+
+    return single, run
+
+
+def _native_sensors(single, qpos, mocap_pos, mocap_quat):
+    """Contact sensors computed from native MuJoCo's contact list."""
+    m = single.mj_model
+    d = mujoco.MjData(m)
+    d.qpos[:], d.mocap_pos[:], d.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+    mujoco.mj_forward(m, d)
+    out = np.zeros(len(sh.CONTACT_SENSORS))
+    for c in d.contact[: d.ncon]:
+        s = max(single.sensor_of_geom[c.geom1], single.sensor_of_geom[c.geom2])
+        if s >= 0 and c.dist < single.config.contact_distance:
+            out[s] = 1
+    return out
+
+
+def test_contact_sensors_fire_when_hands_meet_and_not_when_apart(
+    handshake_env, reset_state, forward_and_contacts
+):
+    single, run = forward_and_contacts
+    data = _one(reset_state.pipeline_state)
+    tip = np.asarray(data.site_xpos[single.tip_sites[sh.FINGERS.index("ff")]])
+    target_palm = np.asarray(data.site_xpos[single.target_palm_site])
+    fired = []
+    # Slide the whole target hand from 1 m away until its palm centre sits on the agent's
+    # first-finger tip: readings are 0 far away and some sensor fires on overlap.
+    for alpha in (-1.0, 0.0, 0.5, 1.0):
+        shift = alpha * (tip - target_palm) + (1.0 if alpha < 0 else 0.0) * np.array([1.0, 0, 0])
+        moved = data.replace(mocap_pos=data.mocap_pos + jnp.asarray(shift, jnp.float32))
+        _, readings = run(moved)
+        readings = np.asarray(readings)
+        native = _native_sensors(
+            single, np.asarray(moved.qpos), np.asarray(moved.mocap_pos), np.asarray(moved.mocap_quat)
+        )
+        assert set(np.flatnonzero(readings)) <= set(np.flatnonzero(native))
+        fired.append(readings)
+    assert fired[0].sum() == 0
+    assert fired[-1][sh.sensor_index("ff_distal")] == 1
+
+
+def test_mjx_agrees_with_native_mujoco_on_a_short_rollout(handshake_env, reset_state):
+    env, _, _ = handshake_env
+    single = env.unwrapped
+    m = single.mj_model
+    data = _one(reset_state.pipeline_state)
+    rng = np.random.default_rng(0)
+    ctrl = rng.uniform(m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1], size=(25, m.nu))
+
+    @jax.jit
+    def rollout(data, ctrl):
+        def body(d, u):
+            d = mjx.step(single.mjx_model, d.replace(ctrl=u))
+            return d, d.qpos
+
+        return jax.lax.scan(body, data, ctrl)[1]
+
+    mjx_qpos = np.asarray(rollout(data, jnp.asarray(ctrl, jnp.float32)))
+    d = mujoco.MjData(m)
+    d.qpos[:] = np.asarray(data.qpos)
+    d.qvel[:] = np.asarray(data.qvel)
+    d.mocap_pos[:] = np.asarray(data.mocap_pos)
+    d.mocap_quat[:] = np.asarray(data.mocap_quat)
+    native = []
+    for u in ctrl:
+        d.ctrl[:] = u
+        mujoco.mj_step(m, d)
+        native.append(d.qpos.copy())
+    native = np.array(native)
+    # float32 MJX against float64 MuJoCo under set-point jumps across the whole range.
+    np.testing.assert_allclose(mjx_qpos, native, atol=1e-3)
+    assert np.abs(native[-1] - np.asarray(data.qpos)).max() > 0.2  # it moved
+
+
+def test_model_sizes_are_lean(handshake_env):
+    env, _, _ = handshake_env
+    sizes = env_lib.model_sizes(env.unwrapped)
+    assert (sizes["nq"], sizes["nv"], sizes["nu"]) == (28, 28, 24)
+    assert sizes["nmocap"] == len(scene.TARGET_LINKS)
+    assert sizes["constraint_rows"] <= 160
