@@ -180,3 +180,18 @@ def test_model_sizes_are_lean(handshake_env):
     assert (sizes["nq"], sizes["nv"], sizes["nu"]) == (28, 28, 24)
     assert sizes["nmocap"] == len(scene.TARGET_LINKS)
     assert sizes["constraint_rows"] <= 160
+
+
+def test_a_diverged_env_ends_its_episode_without_poisoning_the_batch(handshake_env, reset_state):
+    env, _, step = handshake_env
+    data = reset_state.pipeline_state
+    broken = reset_state.replace(pipeline_state=data.replace(qvel=data.qvel.at[3].set(jnp.nan)))
+    state = step(broken, jnp.zeros((env.num_envs, env.action_size)))
+    done = np.asarray(state.done)
+    assert done[3] == 1 and np.asarray(state.info["truncation"])[3] == 0  # termination
+    assert done.sum() == 1
+    # The broken env restarted from a fresh, finite state; nothing non-finite leaks out.
+    assert np.all(np.isfinite(np.asarray(state.obs)))
+    assert np.all(np.isfinite(np.asarray(state.reward)))
+    assert np.all(np.isfinite(np.asarray(state.pipeline_state.qpos)))
+    assert int(state.info["episode"].step[3]) == 0

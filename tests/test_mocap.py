@@ -8,24 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import real_data_or_skip
 
 from mjx_hands import hand_kinematics, mocap, synthetic_demos
 from mjx_hands.shadow_hand import HAND_JOINTS, HAND_POINTS
 
-REAL = Path(__file__).parents[1].parent / "shared/mocap/drl_handshake"
 COUNTS = {"handshake": 10, "handclap": 9, "et": 5}
 FF = HAND_POINTS.index("fftip")
 
 
-def _real_root() -> Path:
-    if not (REAL / "handshake_interaction_t.npy").is_file():
-        pytest.skip(f"the authors' recordings are not at {REAL} (optional, never in the repo)")
-    return REAL
-
-
 @pytest.fixture(scope="module")
 def real():
-    root = _real_root()
+    root = real_data_or_skip()
     return {t: mocap.load_optitrack(t, root) for t in mocap.TASKS}
 
 
@@ -72,7 +66,7 @@ def test_real_loads_with_schema_and_ranges(real):
 def test_real_palms_approach_and_touch(real):
     # Approach: palm-centre distance falls towards contact (hand-clap windows start at the
     # clap, so look 120 frames = 1 s earlier there).
-    root = _real_root()
+    root = real_data_or_skip()
     for task in mocap.TASKS:
         demos = mocap.load_optitrack(task, root, lead_in=120) if task == "handclap" else real[task]
         for d in demos:
@@ -97,7 +91,7 @@ def test_real_palms_approach_and_touch(real):
 
 
 def test_real_fingertip_order_and_calibration():
-    root = _real_root()
+    root = real_data_or_skip()
     measured, modelled = mocap.calibration_samples(root)
     cal = mocap.fit_palm_calibration(measured, modelled)
     assert cal.rms < 0.03 and np.all(cal.finger_rms[1:] < 0.03) and cal.finger_rms[0] < 0.05
@@ -125,7 +119,7 @@ def test_real_fingertip_order_and_calibration():
 def test_real_joint_rows_end_aligned():
     # Row i of the joint arrays is capture frame i + (T - T_joints): the finger-body
     # quaternions' rotation rates correlate with the joint rates at exactly that lag.
-    root = _real_root()
+    root = real_data_or_skip()
     rel = mocap.read_release("handshake", root)
     q = np.load(root / "handshake_rot_human.npy").reshape(-1, 6, 4)
     r = mocap.quat_xyzw_to_matrix(q)
@@ -139,7 +133,7 @@ def test_real_joint_rows_end_aligned():
 
 
 def test_real_capture_frame_y_up_becomes_z_up():
-    root = _real_root()
+    root = real_data_or_skip()
     cal = mocap.estimate_palm_calibration(root)
     rel = mocap.read_release("handshake", root)
     palm_axes = rel.target_rot @ cal.rotation.T  # Shadow palm axes in the sim world
@@ -157,7 +151,7 @@ def test_real_capture_frame_y_up_becomes_z_up():
 def test_real_fps_gives_human_speeds():
     # Peak palm-to-palm approach speed (5-frame smoothing) at the default rate: humans
     # reach at ~0.3-2 m/s. A rate of 60 or 480 Hz would leave that range.
-    rel = mocap.read_release("handshake", _real_root())
+    rel = mocap.read_release("handshake", real_data_or_skip())
     kernel = np.ones(5) / 5
     smooth = np.stack([np.convolve(rel.palm_vec[:, i], kernel, "same") for i in range(3)], -1)
     step = np.linalg.norm(np.diff(smooth, axis=0), axis=-1)  # metres per frame
@@ -181,7 +175,7 @@ def test_real_fps_gives_human_speeds():
 
 
 def test_auto_source_prefers_real_data():
-    root = _real_root()
+    root = real_data_or_skip()
     demos = mocap.load_demonstrations("et", source="auto", path=root)
     assert demos[0].source == "optitrack" and len(demos) == COUNTS["et"]
     if mocap.REAL_DATA_PATH.resolve() == root.resolve():

@@ -1,0 +1,138 @@
+"""Physics and environment throughput: MJX (batched, jitted) beside native MuJoCo.
+
+Both run the same hand-pair model from the same randomised start states under the
+same random set-point sequence, so the report gives a ratio, not only absolute
+numbers. Compile time is measured apart from run time.
+
+    python -m benchmarks.throughput --batch-sizes 32,128 --out benchmarks/results_cpu.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx, rollout
+
+from mjx_hands import env as env_lib
+
+
+def measure_mjx(env: env_lib.HandInteractionEnv, batch: int, control_steps: int) -> dict:
+    """MJX physics-only and full env.step throughput at one batch size."""
+    benv = env_lib.BatchedEnv(env, batch)
+    t0 = time.perf_counter()
+    reset_c = jax.jit(benv.reset).lower(jax.random.PRNGKey(0)).compile()
+    t_reset = time.perf_counter() - t0
+    state = jax.block_until_ready(reset_c(jax.random.PRNGKey(0)))
+    rng = np.random.default_rng(0)
+    actions = jnp.asarray(rng.uniform(-1, 1, (control_steps, batch, env.action_size)), jnp.float32)
+
+    def physics(data, action):
+        ctrl = env.ctrl_lo + 0.5 * (action + 1.0) * (env.ctrl_hi - env.ctrl_lo)
+        data = data.replace(ctrl=ctrl)
+        return jax.lax.fori_loop(0, env.n_substeps, lambda _, d: mjx.step(env.mjx_model, d), data)
+
+    physics_batch = jax.jit(jax.vmap(physics))
+    t0 = time.perf_counter()
+    physics_c = physics_batch.lower(state.pipeline_state, actions[0]).compile()
+    t_physics_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
+    t_step_compile = time.perf_counter() - t0
+
+    data = physics_c(state.pipeline_state, actions[0])  # warm-up
+    jax.block_until_ready(data)
+    t0 = time.perf_counter()
+    for a in actions:
+        data = physics_c(data, a)
+    jax.block_until_ready(data)
+    t_physics = time.perf_counter() - t0
+
+    s = step_c(state, actions[0])
+    jax.block_until_ready(s)
+    t0 = time.perf_counter()
+    for a in actions:
+        s = step_c(s, a)
+    jax.block_until_ready(s)
+    t_env = time.perf_counter() - t0
+    n = batch * control_steps
+    return {
+        "batch": batch,
+        "physics_steps_per_s": n * env.n_substeps / t_physics,
+        "env_control_steps_per_s": n / t_env,
+        "env_physics_steps_per_s": n * env.n_substeps / t_env,
+        "compile_s": {"reset": t_reset, "physics": t_physics_compile, "env_step": t_step_compile},
+        "finite": bool(np.all(np.isfinite(np.asarray(s.obs)))),
+        "_start": state,
+        "_actions": actions,
+    }
+
+
+def measure_native(env: env_lib.HandInteractionEnv, start, actions, nthread: int) -> dict:
+    """``mujoco.rollout`` on all threads, same starts and set-points as MJX."""
+    m = env.mj_model
+    batch = actions.shape[1]
+    data = start.pipeline_state
+    d = mujoco.MjData(m)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    states = np.zeros((batch, mujoco.mj_stateSize(m, spec)))
+    for i in range(batch):
+        d.qpos[:] = np.asarray(data.qpos[i])
+        d.qvel[:] = 0.0
+        d.mocap_pos[:] = np.asarray(data.mocap_pos[i])
+        d.mocap_quat[:] = np.asarray(data.mocap_quat[i])
+        mujoco.mj_getState(m, d, states[i], spec)
+    a = np.asarray(actions, np.float64)
+    ctrl = env.ctrl_lo + 0.5 * (a + 1.0) * (env.ctrl_hi - env.ctrl_lo)  # (T, B, nu)
+    ctrl = np.repeat(ctrl.transpose(1, 0, 2), env.n_substeps, axis=1)  # (B, T*sub, nu)
+    datas = [mujoco.MjData(m) for _ in range(nthread)]
+    with rollout.Rollout(nthread=nthread) as r:
+        r.rollout(m, datas, states, ctrl[:, :1])  # warm-up
+        t0 = time.perf_counter()
+        r.rollout(m, datas, states, ctrl)
+        elapsed = time.perf_counter() - t0
+    return {"nthread": nthread, "physics_steps_per_s": ctrl.shape[0] * ctrl.shape[1] / elapsed}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="handshake")
+    parser.add_argument("--batch-sizes", default="32,128")
+    parser.add_argument("--control-steps", type=int, default=10)
+    parser.add_argument("--out", default=None, help="JSON file to write")
+    args = parser.parse_args()
+
+    env = env_lib.make_env(args.task, mocap_source="synthetic")
+    nthread = os.cpu_count() or 1
+    report = {
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor() or platform.machine(),
+            "cpu_count": nthread,
+            "jax_device": str(jax.devices()[0]),
+        },
+        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "model": env_lib.model_sizes(env),
+        "results": [],
+    }
+    for batch in [int(b) for b in args.batch_sizes.split(",")]:
+        res = measure_mjx(env, batch, args.control_steps)
+        native = measure_native(env, res.pop("_start"), res.pop("_actions"), nthread)
+        res["native"] = native
+        res["mjx_over_native"] = res["physics_steps_per_s"] / native["physics_steps_per_s"]
+        report["results"].append(res)
+        print(json.dumps(res, indent=1), flush=True)
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(report, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
