@@ -104,6 +104,29 @@ def clip_to_range(angles: np.ndarray) -> np.ndarray:
     return np.clip(angles, lower, upper)
 
 
+def _check_angles(angles: np.ndarray) -> np.ndarray:
+    angles = np.atleast_2d(np.asarray(angles, dtype=np.float64))
+    if angles.shape[-1] != len(HAND_JOINTS) or angles.ndim != 2:
+        raise ValueError(f"angles must be (T, {len(HAND_JOINTS)}), got {angles.shape}")
+    return angles
+
+
+def _palm_frames(angles: np.ndarray):
+    """Run FK per posture; yield ``(data, origin, r_palm)`` of the palm frame in the model.
+
+    angles: (T, 20), clipped into the model's ranges (coupled distal joints too).
+    """
+    h = _hand()
+    q = np.clip(full_hand_angles(angles), h.lower, h.upper)  # (T, 24)
+    data = mujoco.MjData(h.model)
+    center = np.asarray(PALM_CENTER)
+    for qt in q:
+        data.qpos[h.qpos_adr] = qt
+        mujoco.mj_kinematics(h.model, data)
+        r_palm = data.xmat[h.palm].reshape(3, 3)
+        yield data, data.xpos[h.palm] + r_palm @ center, r_palm
+
+
 def forward_kinematics(angles: np.ndarray) -> HandPose:
     """Palm-frame fingertips and distal-body orientations of hand postures.
 
@@ -115,26 +138,33 @@ def forward_kinematics(angles: np.ndarray) -> HandPose:
     Returns:
       HandPose with points (T, 6, 3) and frames (T, 6, 3, 3) (no T axis for (20,) input).
     """
-    angles = np.asarray(angles, dtype=np.float64)
-    single = angles.ndim == 1
-    angles = np.atleast_2d(angles)
-    if angles.shape[-1] != len(HAND_JOINTS) or angles.ndim != 2:
-        raise ValueError(f"angles must be (T, {len(HAND_JOINTS)}), got {angles.shape}")
+    single = np.ndim(angles) == 1
+    angles = _check_angles(angles)
     h = _hand()
-    q = np.clip(full_hand_angles(angles), h.lower, h.upper)  # (T, 24)
-    data = mujoco.MjData(h.model)
-    center = np.asarray(PALM_CENTER)
-    points = np.empty((len(q), 6, 3))
-    frames = np.empty((len(q), 6, 3, 3))
-    for t, qt in enumerate(q):
-        data.qpos[h.qpos_adr] = qt
-        mujoco.mj_kinematics(h.model, data)
-        r_palm = data.xmat[h.palm].reshape(3, 3)
-        origin = data.xpos[h.palm] + r_palm @ center
-        points[t, 0] = 0.0
+    points = np.zeros((len(angles), 6, 3))
+    frames = np.empty((len(angles), 6, 3, 3))
+    for t, (data, origin, r_palm) in enumerate(_palm_frames(angles)):
         points[t, 1:] = (data.site_xpos[h.tips] - origin) @ r_palm
         frames[t, 0] = np.eye(3)
         frames[t, 1:] = r_palm.T @ data.xmat[h.distal].reshape(-1, 3, 3)
     if single:
         return HandPose(points=points[0], frames=frames[0])
     return HandPose(points=points, frames=frames)
+
+
+def link_poses(angles: np.ndarray, links: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Palm-frame poses of hand bodies (names without prefix) for postures (T, 20).
+
+    Returns:
+      positions (T, len(links), 3) and quaternions (T, len(links), 4), ``w, x, y, z``.
+    """
+    angles = _check_angles(angles)
+    model = _hand().model
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, hand_name(n)) for n in links]
+    pos = np.empty((len(angles), len(ids), 3))
+    quat = np.empty((len(angles), len(ids), 4))
+    for t, (data, origin, r_palm) in enumerate(_palm_frames(angles)):
+        pos[t] = (data.xpos[ids] - origin) @ r_palm
+        for k, mat in enumerate(r_palm.T @ data.xmat[ids].reshape(-1, 3, 3)):
+            mujoco.mju_mat2Quat(quat[t, k], mat.reshape(9))
+    return pos, quat

@@ -31,6 +31,7 @@ import os
 import mujoco
 import numpy as np
 
+from mjx_hands import hand_kinematics
 from mjx_hands import shadow_hand as sh
 
 SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
@@ -48,7 +49,6 @@ TARGET_LINKS = (
     "lfmetacarpal", "lfknuckle", "lfproximal", "lfmiddle", "lfdistal",
     "thproximal", "thmiddle", "thdistal",
 )  # fmt: skip
-DISTAL_BODY = {f: f"{f}distal" for f in sh.FINGERS}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -248,40 +248,8 @@ def target_poses(angles: np.ndarray) -> TargetPoses:
 
     Angles are clipped into the model's joint ranges (coupled distal joints too).
     """
-    model = hand_kinematics_model()
-    data = mujoco.MjData(model)
-    qadr = [model.joint(sh.hand_name(n)).qposadr[0] for n in sh.ALL_HAND_JOINTS]
-    jrange = np.array([model.joint(sh.hand_name(n)).range for n in sh.ALL_HAND_JOINTS])
-    qpos = np.clip(sh.full_hand_angles(np.asarray(angles, np.float64)), jrange[:, 0], jrange[:, 1])
-    links = [model.body(sh.hand_name(n)).id for n in TARGET_LINKS]
-    point_bodies = [model.body(sh.hand_name("palm")).id] + [
-        model.body(sh.hand_name(DISTAL_BODY[f])).id for f in sh.FINGERS
-    ]
-    tips = [model.site(sh.hand_name(f"S_{t}")).id for t in sh.FINGERTIPS]
-    n = qpos.shape[0]
-    out = TargetPoses(
-        link_pos=np.zeros((n, len(links), 3)),
-        link_quat=np.zeros((n, len(links), 4)),
-        point_pos=np.zeros((n, 6, 3)),
-        point_rot=np.zeros((n, 6, 3, 3)),
+    pose = hand_kinematics.forward_kinematics(np.atleast_2d(angles))
+    link_pos, link_quat = hand_kinematics.link_poses(angles, TARGET_LINKS)
+    return TargetPoses(
+        link_pos=link_pos, link_quat=link_quat, point_pos=pose.points, point_rot=pose.frames
     )
-    palm = point_bodies[0]
-    for i in range(n):
-        data.qpos[qadr] = qpos[i]
-        mujoco.mj_kinematics(model, data)
-        rot_palm = data.xmat[palm].reshape(3, 3)
-        origin = data.xpos[palm] + rot_palm @ np.asarray(sh.PALM_CENTER)
-        to_palm = lambda x: (x - origin) @ rot_palm  # world -> palm frame (row vectors)
-        out.link_pos[i] = to_palm(data.xpos[links])
-        rel = rot_palm.T @ data.xmat[links].reshape(-1, 3, 3)
-        out.link_quat[i] = _mats_to_quats(rel)
-        out.point_pos[i, 1:] = to_palm(data.site_xpos[tips])
-        out.point_rot[i] = rot_palm.T @ data.xmat[point_bodies].reshape(-1, 3, 3)
-    return out
-
-
-def _mats_to_quats(mats: np.ndarray) -> np.ndarray:
-    quats = np.zeros((len(mats), 4))
-    for k, mat in enumerate(mats):
-        mujoco.mju_mat2Quat(quats[k], mat.reshape(9))
-    return quats
