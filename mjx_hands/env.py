@@ -115,6 +115,10 @@ class EnvConfig:
     at its nominal pose (world, metres; the shoulder is at the origin)."""
     target_box: tuple[float, float, float] = (0.05, 0.05, 0.05)
     """Half-extent of the uniform box of target palm positions, metres."""
+    target_rotation_noise: float = 0.0
+    """Std of the angle (radians) of a random rotation, about a uniformly random axis,
+    applied to the target hand per episode (0: the task's nominal orientation; the
+    paper's robustness experiments perturb it)."""
     start_offset_steps: int = 5
     """t_off: the latest start step is t_min - t_off (control steps)."""
     start_position_noise: float = 0.02
@@ -236,7 +240,7 @@ class HandInteractionEnv(Env):
 
     def reset(self, rng: jax.Array) -> State:
         """Start an episode with the paper's randomisation. rng: (2,) key."""
-        rng, k_demo, k_start, k_frame, k_box, k_pos, k_joint = jax.random.split(rng, 7)
+        rng, k_demo, k_start, k_frame, k_box, k_pos, k_joint, k_rot = jax.random.split(rng, 8)
         p = self.params
         demo = jax.random.randint(k_demo, (), 0, p.t_min_step.shape[0])
         t_min = p.t_min_step[demo]
@@ -248,10 +252,17 @@ class HandInteractionEnv(Env):
         target_pos = self.target_center + jax.random.uniform(
             k_box, (3,), minval=-box, maxval=box
         )
-        target_rot = self.target_rot
+        # Orientation robustness: a rotation of Gaussian angle about a uniform random axis.
+        k_axis, k_angle = jax.random.split(k_rot)
+        axis = jax.random.normal(k_axis, (3,))
+        axis = axis / jnp.linalg.norm(axis)
+        angle = self.config.target_rotation_noise * jax.random.normal(k_angle, ())
+        tilt = spatial.axis_angle_quat(axis, angle)
+        target_quat = spatial.quat_mul(tilt, self.target_quat)
+        target_rot = spatial.quat_to_mat(tilt) @ self.target_rot
         to_world = lambda x: target_pos + x @ target_rot.T
         link_pos = to_world(self.link_pos[demo, frame])
-        link_quat = spatial.quat_mul(self.target_quat, self.link_quat[demo, frame])
+        link_quat = spatial.quat_mul(target_quat, self.link_quat[demo, frame])
         target_points = to_world(self.point_pos[demo, frame])
         target_frames = target_rot @ self.point_rot[demo, frame]
         goal_points = rewards.goal_positions(

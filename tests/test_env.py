@@ -195,3 +195,23 @@ def test_a_diverged_env_ends_its_episode_without_poisoning_the_batch(handshake_e
     assert np.all(np.isfinite(np.asarray(state.reward)))
     assert np.all(np.isfinite(np.asarray(state.pipeline_state.qpos)))
     assert int(state.info["episode"].step[3]) == 0
+
+
+def test_target_orientation_noise_rotates_the_whole_target_hand():
+    """Host-only: the tilted target's mocap links keep the hand's shape (rigid motion)."""
+    env = env_lib.make_env("et", mocap_source="synthetic", target_rotation_noise=0.5)
+    state = jax.jit(env.reset)(jax.random.PRNGKey(3))
+    ep = state.info["episode"]
+    rot = np.asarray(ep.target_rot)
+    nominal = np.asarray(env.target_rot)
+    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-5)
+    assert np.abs(rot - nominal).max() > 0.05  # tilted away from the nominal pose
+    # The mocap palm sits and turns where the tilted frame says it does.
+    d = mujoco.MjData(env.mj_model)
+    d.mocap_pos[:] = np.asarray(state.pipeline_state.mocap_pos)
+    d.mocap_quat[:] = np.asarray(state.pipeline_state.mocap_quat)
+    mujoco.mj_kinematics(env.mj_model, d)
+    palm = d.site_xpos[env.target_palm_site]
+    np.testing.assert_allclose(palm, np.asarray(ep.target_pos), atol=1e-5)
+    body = env.mj_model.body(scene.TARGET + "palm").id
+    np.testing.assert_allclose(d.xmat[body].reshape(3, 3), rot, atol=1e-5)
