@@ -3,7 +3,7 @@
 ``make_env`` is imported lazily so that ``import mjx_hands`` stays cheap.
 """
 
-__all__ = ["make_env", "TASKS"]
+__all__ = ["TASKS", "make_env"]
 TASKS = ("handshake", "handclap", "et")
 
 

@@ -34,7 +34,6 @@ phase                  2    step / episode length, imitation-active flag
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 from typing import Any
 

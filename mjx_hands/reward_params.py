@@ -314,8 +314,8 @@ def algorithm1(
     w_position[selected] = weights.K_p * floored[selected].min() / floored[selected]
 
     required = required_contact_mask(demo.task)
-    f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
-    i32 = lambda x: np.asarray(x, np.int32)  # noqa: E731
+    f32 = lambda x: np.asarray(x, np.float32)
+    i32 = lambda x: np.asarray(x, np.int32)
     return RewardParams(
         j_min=i32(j_min),
         d_min=f32(d_min),

@@ -191,7 +191,7 @@ def _add_pairs(world: mujoco.MjSpec, cfg: SceneConfig) -> None:
             )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def hand_kinematics_model() -> mujoco.MjModel:
     """A lone, cleaned hand (palm at the stock mount pose): forward kinematics only."""
     hand = _hand_spec()
@@ -218,7 +218,7 @@ def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     return world
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def build_model(cfg: SceneConfig = SceneConfig()) -> mujoco.MjModel:
     """Compiled hand-pair model (cached per config)."""
     return build_spec(cfg).compile()

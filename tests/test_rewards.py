@@ -8,20 +8,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from test_reward_params import make_demo
 
 from mjx_hands import reward_params as rp
 from mjx_hands import rewards
 from mjx_hands.reward_params import RewardParams
-
-from test_reward_params import make_demo
 
 L = 7
 
 
 def random_params(rng, batch=()) -> RewardParams:
     """Arbitrary (not Alg.-1-consistent) params, so every weight matters."""
-    u = lambda *shape: rng.uniform(-1, 1, batch + shape).astype(np.float32)  # noqa: E731
-    pos = lambda *shape: rng.uniform(0.05, 2, batch + shape).astype(np.float32)  # noqa: E731
+    u = lambda *shape: rng.uniform(-1, 1, batch + shape).astype(np.float32)
+    pos = lambda *shape: rng.uniform(0.05, 2, batch + shape).astype(np.float32)
     return RewardParams(
         j_min=rng.integers(0, 6, batch).astype(np.int32),
         d_min=pos(),
