@@ -24,6 +24,16 @@ from mujoco import mjx, rollout
 from mjx_hands import env as env_lib
 
 
+def _time_loop(step, carry, actions):
+    """Seconds for ``carry = step(carry, a)`` over ``actions`` after one warm-up call."""
+    carry = jax.block_until_ready(step(carry, actions[0]))
+    t0 = time.perf_counter()
+    for a in actions:
+        carry = step(carry, a)
+    jax.block_until_ready(carry)
+    return carry, time.perf_counter() - t0
+
+
 def measure_mjx(env: env_lib.HandInteractionEnv, batch: int, control_steps: int) -> dict:
     """MJX physics-only and full env.step throughput at one batch size."""
     benv = env_lib.BatchedEnv(env, batch)
@@ -47,21 +57,8 @@ def measure_mjx(env: env_lib.HandInteractionEnv, batch: int, control_steps: int)
     step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
     t_step_compile = time.perf_counter() - t0
 
-    data = physics_c(state.pipeline_state, actions[0])  # warm-up
-    jax.block_until_ready(data)
-    t0 = time.perf_counter()
-    for a in actions:
-        data = physics_c(data, a)
-    jax.block_until_ready(data)
-    t_physics = time.perf_counter() - t0
-
-    s = step_c(state, actions[0])
-    jax.block_until_ready(s)
-    t0 = time.perf_counter()
-    for a in actions:
-        s = step_c(s, a)
-    jax.block_until_ready(s)
-    t_env = time.perf_counter() - t0
+    _, t_physics = _time_loop(physics_c, state.pipeline_state, actions)
+    s, t_env = _time_loop(step_c, state, actions)
     n = batch * control_steps
     return {
         "batch": batch,

@@ -87,6 +87,11 @@ def _hand() -> _Hand:
     )
 
 
+def hand_model() -> mujoco.MjModel:
+    """The lone stock hand (compiled once): geometry and kinematics, no dynamics use."""
+    return _hand().model
+
+
 def joint_range() -> tuple[np.ndarray, np.ndarray]:
     """Range of the 20 actuated joints in the gymnasium-robotics model.
 

@@ -191,18 +191,6 @@ def _add_pairs(world: mujoco.MjSpec, cfg: SceneConfig) -> None:
             )
 
 
-@functools.cache
-def hand_kinematics_model() -> mujoco.MjModel:
-    """A lone, cleaned hand (palm at the stock mount pose): forward kinematics only."""
-    hand = _hand_spec()
-    _clean_hand(hand)
-    mount = hand.body(sh.hand_name("hand mount"))
-    mount.pos, mount.quat = [0, 0, 0], [1, 0, 0, 0]
-    hand.body(sh.hand_name("forearm")).pos = [0, 0, 0]
-    _add_distal_couplings(hand, "")
-    return hand.compile()
-
-
 def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     """The full hand-pair scene as an ``MjSpec`` (see module docstring)."""
     world = mujoco.MjSpec.from_file(os.path.join(SCENE_DIR, "world.xml"))
@@ -211,7 +199,7 @@ def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     world.option.ls_iterations = cfg.ls_iterations
     world.meshdir = os.path.join(sh.asset_dir(), "..", "stls", "hand")
     _add_agent(world)
-    _add_target(world, hand_kinematics_model())
+    _add_target(world, hand_kinematics.hand_model())
     _add_pairs(world, cfg)
     world.add_numeric(name="max_geom_pairs", data=[cfg.max_geom_pairs])
     world.add_numeric(name="max_contact_points", data=[cfg.max_contact_points])

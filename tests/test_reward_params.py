@@ -10,25 +10,10 @@ import numpy as np
 import pytest
 
 from mjx_hands import reward_params as rp
+from mjx_hands.mocap import Demonstration
 from mjx_hands.reward_params import RewardWeights
 
-
-@dataclasses.dataclass(frozen=True)
-class Demo:
-    """Same fields as ``mjx_hands.mocap.Demonstration`` (Algorithm 1 only reads them)."""
-
-    task: str
-    name: str
-    source: str
-    fps: float
-    actor_joints: np.ndarray
-    target_joints: np.ndarray
-    actor_points: np.ndarray
-    actor_palm_rot: np.ndarray
-    target_points: np.ndarray
-    target_frames: np.ndarray
-    contact_begin: int
-    contact_end: int
+Demo = Demonstration  # Algorithm 1 reads the fields; tests build them directly
 
 
 def rotation(axis, angle):
