@@ -1,27 +1,52 @@
 """Train a hand-interaction policy: the project's single command.
 
-The DDPG trainer is the next milestone; until it lands this command checks that the
-chosen task's environment builds and steps, and says so.
+    python train.py --task handshake            # the paper's DDPG, preset by device
+    python train.py --task et --no-imitation    # an ablation
+    python train.py --run-dir runs/x --resume   # continue a run
+
+Everything written goes to the run directory: config.json, metrics.csv, TensorBoard
+events (``tensorboard --logdir runs``), Orbax checkpoints and success.png.
+``python -m mjx_hands.evaluate RUN_DIR`` reloads the policy and renders a video.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 
-from mjx_hands import TASKS
+
+def _preset_name(argv: list[str]) -> str:
+    for i, arg in enumerate(argv):
+        if arg == "--preset" and i + 1 < len(argv):
+            return argv[i + 1]
+        if arg.startswith("--preset="):
+            return arg.split("=", 1)[1]
+    return "auto"
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--task", default="handshake", choices=TASKS)
-    parser.add_argument("--num-envs", type=int, default=64)
-    args = parser.parse_args(argv)
-    print("Training arrives with the DDPG trainer; checking the environment instead.")
-    from mjx_hands import env
+    import tyro
 
-    sys.argv = [sys.argv[0], "--task", args.task, "--num-envs", str(args.num_envs), "--steps", "5"]
-    env._main()
+    from mjx_hands import checkpoint, training
+    from mjx_hands.mocap import MocapError
+
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        default = training.preset(_preset_name(argv))
+        config = tyro.cli(training.TrainConfig, default=default, args=argv, description=__doc__)
+        summary = training.run(config)
+    except training.TrainingDiverged as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 3
+    except (ValueError, MocapError, checkpoint.CheckpointError, FileNotFoundError,
+            FileExistsError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    final = summary["final_eval"]
+    print(
+        f"done ({summary['stop_reason']}): {summary['epochs']} epochs, "
+        f"eval success {final.get('eval/success', float('nan')):.2f}, "
+        f"best {summary['best_eval_success']:.2f}; results in {summary['run_dir']}"
+    )
     return 0
 
 

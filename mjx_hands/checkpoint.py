@@ -1,0 +1,119 @@
+"""Orbax checkpoints of a training run: every array needed to continue, plus JSON metadata.
+
+A checkpoint holds the trainer state as a flat mapping ``leaf_<i> -> array`` (host
+numpy, the device axis kept) and a JSON record of the run config, the epoch, and the
+path, shape and dtype of every leaf. Restoring checks that record against the state
+the current config builds, so a checkpoint of another task, network size, batch or
+device count is refused with a message naming the first mismatch instead of failing
+deep inside Orbax. Orbax writes each step to a temporary folder and renames it when
+complete, so a crash during a save leaves the previous checkpoint intact.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, unreadable, or does not fit the current configuration."""
+
+
+def _leaves(tree) -> tuple[list[str], list[np.ndarray], Any]:
+    with_path, treedef = jax.tree_util.tree_flatten_with_path(tree)
+    paths = [jax.tree_util.keystr(p) for p, _ in with_path]
+    return paths, [np.asarray(x) for _, x in with_path], treedef
+
+
+def _manager(directory: Path, max_to_keep: int = 3) -> ocp.CheckpointManager:
+    options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=True)
+    return ocp.CheckpointManager(Path(directory).absolute(), options=options)
+
+
+def save(directory: Path, step: int, state, metadata: dict[str, Any]) -> None:
+    """Write ``state`` (any pytree of arrays) and ``metadata`` (JSON-able) as ``step``."""
+    paths, leaves, _ = _leaves(jax.device_get(state))
+    record = dict(metadata)
+    record["leaves"] = [
+        {"path": p, "shape": list(x.shape), "dtype": str(x.dtype)} for p, x in zip(paths, leaves)
+    ]
+    arrays = {f"leaf_{i:05d}": x for i, x in enumerate(leaves)}
+    with _manager(directory) as manager:
+        manager.save(
+            step,
+            args=ocp.args.Composite(
+                state=ocp.args.StandardSave(arrays), metadata=ocp.args.JsonSave(record)
+            ),
+        )
+        manager.wait_until_finished()
+
+
+def latest_step(directory: Path) -> int | None:
+    """The newest complete checkpoint step in ``directory``, or None."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return None
+    with _manager(directory) as manager:
+        return manager.latest_step()
+
+
+def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
+    """The JSON record of checkpoint ``step`` (default: the latest)."""
+    step = _resolve_step(directory, step)
+    with _manager(directory) as manager:
+        restored = manager.restore(
+            step, args=ocp.args.Composite(metadata=ocp.args.JsonRestore())
+        )
+    return dict(restored["metadata"])
+
+
+def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[str, Any]]:
+    """Load checkpoint ``step`` (default: latest) into the structure of ``like``.
+
+    ``like`` is a state built from the current config (its values are ignored); the
+    checkpoint must have the same leaves with the same shapes and dtypes.
+    Returns the restored state (host numpy leaves) and the metadata.
+    """
+    step = _resolve_step(directory, step)
+    metadata = read_metadata(directory, step)
+    with_path, treedef = jax.tree_util.tree_flatten_with_path(like)
+    paths = [jax.tree_util.keystr(p) for p, _ in with_path]
+    leaves = [jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype if not hasattr(x, "dtype") else x.dtype)
+              for _, x in with_path]
+    saved = metadata.get("leaves", [])
+    if len(saved) != len(paths):
+        raise CheckpointError(
+            f"checkpoint {directory} step {step} has {len(saved)} arrays but the current "
+            f"configuration needs {len(paths)}: it was written by an incompatible config"
+        )
+    for entry, path, leaf in zip(saved, paths, leaves):
+        if entry["path"] != path or tuple(entry["shape"]) != tuple(leaf.shape) or (
+            entry["dtype"] != str(leaf.dtype)
+        ):
+            raise CheckpointError(
+                f"checkpoint {directory} step {step} is incompatible with the current "
+                f"configuration: it holds {entry['path']} {entry['dtype']}{tuple(entry['shape'])}, "
+                f"the config expects {path} {leaf.dtype}{tuple(leaf.shape)}"
+            )
+    abstract = {
+        f"leaf_{i:05d}": jax.ShapeDtypeStruct(leaf.shape, leaf.dtype)
+        for i, leaf in enumerate(leaves)
+    }
+    with _manager(directory) as manager:
+        restored = manager.restore(
+            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
+        )
+    arrays = [np.asarray(restored["state"][f"leaf_{i:05d}"]) for i in range(len(leaves))]
+    return jax.tree_util.tree_unflatten(treedef, arrays), metadata
+
+
+def _resolve_step(directory: Path, step: int | None) -> int:
+    if step is None:
+        step = latest_step(directory)
+        if step is None:
+            raise CheckpointError(f"no checkpoint found in {directory}")
+    return step

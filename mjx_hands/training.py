@@ -1,0 +1,412 @@
+"""The training run behind ``train.py``: config, presets, loop, logs, checkpoints.
+
+The Python loop only calls the compiled epoch, evaluates, logs and checkpoints
+(:mod:`mjx_hands.agents.ddpg`). A run directory holds ``config.json``,
+``metrics.csv`` (one row per epoch; evaluation columns filled every ``eval_every``
+epochs), TensorBoard event files, ``checkpoints/`` (Orbax) and ``success.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import jax
+import numpy as np
+
+from mjx_hands import checkpoint
+from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState
+
+Task = Literal["handshake", "handclap", "et"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Train a hand-interaction policy with DDPG (or Brax's SAC/PPO for comparison)."""
+
+    task: Task = "handshake"
+    """Interaction to learn."""
+    reward: Literal["full", "baseline1", "baseline2"] = "full"
+    """Reward: the paper's full reward, baseline1 (palm position only), baseline2
+    (no contact term)."""
+    imitation: bool = True
+    """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
+    mocap: str | None = None
+    """Folder of demonstrations; default: the authors' recordings in
+    ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
+    mocap_source: Literal["auto", "optitrack", "synthetic"] = "auto"
+    """Which demonstrations to read."""
+    target_rotation_noise: float = 0.0
+    """Std (radians) of a random per-episode rotation of the target hand."""
+    algo: Literal["ddpg", "sac", "ppo"] = "ddpg"
+    """Learner: DDPG (the paper's) or Brax's SAC / PPO on the same environment."""
+    preset: Literal["auto", "cpu", "gpu"] = "auto"
+    """Size of the run; auto picks by the device JAX finds."""
+    num_envs: int = 64
+    """Parallel environments (summed over devices)."""
+    epochs: int = 100
+    """Training epochs (see --ddpg.iterations-per-epoch etc. for an epoch's size)."""
+    max_minutes: float | None = None
+    """Stop (with a checkpoint) once training has run this long."""
+    eval_every: int = 5
+    """Evaluate (and checkpoint) every this many epochs."""
+    eval_envs: int = 64
+    """Episodes per evaluation (summed over devices), deterministic policy."""
+    seed: int = 0
+    """Seed of networks, exploration and episode randomisation."""
+    run_dir: str | None = None
+    """Output folder; default runs/<task>-<algo>-<time>."""
+    resume: bool = False
+    """Continue the run in --run-dir from its latest checkpoint."""
+    save_replay: bool = True
+    """Include the replay buffer in checkpoints (resume then equals an uninterrupted run)."""
+    ddpg: DDPGConfig = DDPGConfig()
+    """DDPG hyperparameters."""
+
+    def __post_init__(self):
+        problems = []
+        for name in ("num_envs", "epochs", "eval_every", "eval_envs"):
+            if getattr(self, name) <= 0:
+                problems.append(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        if self.max_minutes is not None and self.max_minutes <= 0:
+            problems.append(f"--max-minutes must be positive, got {self.max_minutes}")
+        if self.target_rotation_noise < 0:
+            problems.append("--target-rotation-noise must be >= 0")
+        if problems:
+            raise ValueError("; ".join(problems))
+
+
+def preset(kind: str, **overrides: Any) -> TrainConfig:
+    """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs)."""
+    if kind == "auto":
+        kind = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "cpu"
+    if kind == "cpu":
+        base = TrainConfig(
+            preset="cpu",
+            num_envs=64,
+            epochs=60,
+            eval_envs=64,
+            ddpg=DDPGConfig(
+                replay_capacity=200_000,
+                unroll_length=10,
+                updates_per_iteration=64,
+                iterations_per_epoch=10,
+            ),
+        )
+    elif kind == "gpu":
+        base = TrainConfig(
+            preset="gpu",
+            num_envs=4096,
+            epochs=200,
+            eval_envs=1024,
+            save_replay=False,
+            ddpg=DDPGConfig(
+                batch_size=4096,
+                replay_capacity=2_000_000,
+                min_replay_size=40_960,
+                unroll_length=5,
+                updates_per_iteration=20,
+                iterations_per_epoch=10,
+            ),
+        )
+    else:
+        raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
+    return dataclasses.replace(base, **overrides)
+
+
+# ---------------------------------------------------------------- build
+def make_envs(config: TrainConfig, num_devices: int):
+    """(train env, eval env, single env) with per-device batch sizes."""
+    from mjx_hands import env as env_lib
+
+    for name in ("num_envs", "eval_envs"):
+        if getattr(config, name) % num_devices:
+            raise ValueError(
+                f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
+                f"the {num_devices} devices"
+            )
+    variant = config.reward if config.imitation else (
+        "no_imitation" if config.reward == "full" else config.reward
+    )
+    from mjx_hands import reward_params
+
+    weights = reward_params.variant(config.reward)
+    if not config.imitation:
+        weights = dataclasses.replace(weights, imitation=False)
+    single = env_lib.HandInteractionEnv(
+        env_lib.EnvConfig(
+            task=config.task,
+            reward=variant,
+            weights=weights,
+            mocap_source=config.mocap_source,
+            mocap_path=config.mocap,
+            target_rotation_noise=config.target_rotation_noise,
+        )
+    )
+    train_env = env_lib.BatchedEnv(single, config.num_envs // num_devices)
+    eval_env = env_lib.BatchedEnv(single, config.eval_envs // num_devices)
+    return train_env, eval_env, single
+
+
+def make_learner(config: TrainConfig, devices=None, env_factory=None) -> tuple[DDPG, Any]:
+    """The DDPG learner of ``config`` and its single (unbatched) environment.
+
+    ``env_factory(config, num_devices) -> (train_env, eval_env, single_env)`` replaces
+    the hand environment (tests train the point-reach task through the same loop).
+    """
+    devices = devices or jax.local_devices()
+    train_env, eval_env, single = (env_factory or make_envs)(config, len(devices))
+    algo = DDPG(
+        train_env,
+        config.ddpg,
+        episode_length=single.episode_length,
+        eval_env=eval_env,
+        devices=devices,
+    )
+    return algo, single
+
+
+# ------------------------------------------------------------- logging
+class MetricsLog:
+    """metrics.csv + TensorBoard events in the run directory; appends on resume."""
+
+    def __init__(self, run_dir: Path):
+        self.path = run_dir / "metrics.csv"
+        self.rows: list[dict[str, float]] = []
+        if self.path.exists():
+            with self.path.open() as f:
+                self.rows = [{k: float(v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)]
+        try:
+            from tensorboardX import SummaryWriter
+
+            self.tb = SummaryWriter(str(run_dir / "tensorboard"))
+        except ImportError:  # pragma: no cover - tensorboardX is a dependency
+            self.tb = None
+
+    def append(self, row: dict[str, float]) -> None:
+        self.rows.append(row)
+        keys: list[str] = []
+        for r in self.rows:
+            keys += [k for k in r if k not in keys]
+        with self.path.open("w", newline="") as f:  # rewritten: columns may grow (eval)
+            writer = csv.DictWriter(f, fieldnames=keys)
+            writer.writeheader()
+            writer.writerows(self.rows)
+        if self.tb is not None:
+            step = int(row["train/env_steps"])
+            for k, v in row.items():
+                if k not in ("epoch", "train/env_steps"):
+                    self.tb.add_scalar(k, v, step)
+            self.tb.flush()
+
+    def close(self) -> None:
+        if self.tb is not None:
+            self.tb.close()
+
+
+def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
+    """Evaluation success rate (and final-step success) against env steps, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    evals = [r for r in rows if "eval/success" in r]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    if evals:
+        steps = [r["train/env_steps"] for r in evals]
+        ax.plot(steps, [r["eval/success"] for r in evals], "o-", label="contact reached")
+        ax.plot(steps, [r["eval/success_final"] for r in evals], "s--", label="contact at the end")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("evaluation success rate")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------- run
+def _checkpoint_tree(state: TrainerState, algo: DDPG, save_replay: bool) -> dict[str, Any]:
+    tree = {
+        "learner": jax.tree.map(lambda x: x[0], state.learner),
+        "env_state": state.env_state,
+        "stats": state.stats,
+        "rng": state.rng,
+        "env_steps": state.env_steps,
+    }
+    if save_replay:
+        tree["buffer"] = state.buffer
+    return tree
+
+
+def _from_checkpoint_tree(tree: dict[str, Any], fresh: TrainerState, algo: DDPG) -> TrainerState:
+    n = algo.num_devices
+    learner = jax.tree.map(lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"])
+    state = fresh.replace(
+        learner=learner,
+        env_state=tree["env_state"],
+        stats=tree["stats"],
+        rng=tree["rng"],
+        env_steps=tree["env_steps"],
+        buffer=tree.get("buffer", fresh.buffer),
+    )
+    return jax.pmap(lambda tree: tree, devices=algo.devices)(state)  # one shard per device
+
+
+def config_to_json(config: TrainConfig) -> dict[str, Any]:
+    return dataclasses.asdict(config)
+
+
+def config_from_json(data: dict[str, Any]) -> TrainConfig:
+    data = dict(data)
+    ddpg = dict(data.pop("ddpg"))
+    for key in ("hidden_sizes", "target_clip"):
+        if ddpg.get(key) is not None:
+            ddpg[key] = tuple(ddpg[key])
+    return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
+
+
+# Settings a resumed run must share with its checkpoint: they fix the task, the
+# networks' and buffers' shapes. Everything else (learning rates, budget) may change.
+RESUME_FIXED = ("task", "reward", "imitation", "mocap_source", "num_envs", "algo",
+                "ddpg.hidden_sizes", "ddpg.layer_norm", "ddpg.replay_capacity")
+
+
+def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
+    current = json.loads(json.dumps(config_to_json(config)))  # tuples as JSON lists
+
+    def get(tree, dotted):
+        for part in dotted.split("."):
+            tree = tree.get(part) if isinstance(tree, dict) else None
+        return tree
+
+    for key in RESUME_FIXED:
+        if get(saved, key) != get(current, key):
+            raise checkpoint.CheckpointError(
+                f"--resume: {run_dir} was trained with {key}={get(saved, key)!r}, "
+                f"this command asks for {get(current, key)!r}"
+            )
+
+
+class TrainingDiverged(RuntimeError):
+    """Losses or parameters became NaN/inf; the last good checkpoint is kept."""
+
+
+def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+    """Train according to ``config``; returns a summary (final metrics, paths).
+
+    ``env_factory``: see :func:`make_learner` (default: the hand environment).
+    """
+    run_dir = Path(config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}")
+    ckpt_dir = run_dir / "checkpoints"
+    config_path = run_dir / "config.json"
+    if config.resume:
+        if not config_path.is_file():
+            raise FileNotFoundError(f"--resume: no run to continue in {run_dir} (config.json missing)")
+        _check_resumable(json.loads(config_path.read_text()), config, run_dir)
+    elif config_path.exists() and checkpoint.latest_step(ckpt_dir) is not None:
+        raise FileExistsError(
+            f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir"
+        )
+    if config.algo != "ddpg":
+        from mjx_hands import brax_agents
+
+        return brax_agents.run(config, run_dir, out=out)
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    config_path.write_text(json.dumps(config_to_json(config), indent=2))
+    algo, single = make_learner(config, env_factory=env_factory)
+    demos = getattr(single, "demos", None)
+    source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
+    print(
+        f"{config.task}: {source}, "
+        f"{config.num_envs} envs on {algo.num_devices} {jax.default_backend()} device(s), "
+        f"episode {single.episode_length} steps, run dir {run_dir}",
+        file=out,
+        flush=True,
+    )
+    key = jax.random.PRNGKey(config.seed)
+    state = algo.init(key)
+    start_epoch = 0
+    if config.resume and checkpoint.latest_step(ckpt_dir) is not None:
+        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, algo, config.save_replay))
+        state = _from_checkpoint_tree(tree, state, algo)
+        start_epoch = int(meta["epoch"])
+        print(f"resumed from epoch {start_epoch}", file=out, flush=True)
+
+    log = MetricsLog(run_dir)
+    log.rows = [r for r in log.rows if r.get("epoch", 0) <= start_epoch]
+    steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
+    started = time.perf_counter()
+    last_saved = start_epoch
+    stop_reason = "epochs"
+
+    def save(epoch: int) -> None:
+        nonlocal last_saved
+        meta = {"epoch": epoch, "config": config_to_json(config), "num_devices": algo.num_devices}
+        checkpoint.save(ckpt_dir, epoch, _checkpoint_tree(state, algo, config.save_replay), meta)
+        last_saved = epoch
+
+    try:
+        for epoch in range(start_epoch + 1, config.epochs + 1):
+            t0 = time.perf_counter()
+            state, metrics = algo.run_epoch(state)
+            seconds = time.perf_counter() - t0
+            losses_finite = all(
+                math.isfinite(v) for k, v in metrics.items() if k.startswith("sgd/")
+            )
+            if not losses_finite or metrics["train/params_finite"] < 1.0:
+                bad = {k: v for k, v in metrics.items() if k.startswith("sgd/") and not math.isfinite(v)}
+                raise TrainingDiverged(
+                    f"epoch {epoch}: training diverged (non-finite {sorted(bad) or 'parameters'}); "
+                    f"the last good checkpoint (epoch {last_saved}) is in {ckpt_dir}; "
+                    "lower the learning rates or enable --ddpg.layer-norm and --resume"
+                )
+            row = {"epoch": float(epoch), "time/epoch_seconds": seconds,
+                   "time/env_steps_per_second": steps_per_epoch / seconds} | metrics
+            evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
+            elapsed = time.perf_counter() - started
+            out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
+            if evaluate or out_of_time:
+                eval_key = jax.random.fold_in(jax.random.PRNGKey(config.seed + 1), epoch)
+                row |= algo.evaluate(state, eval_key)
+            log.append(row)
+            remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
+            line = (
+                f"epoch {epoch:4d}/{config.epochs}  {row['time/env_steps_per_second']:8,.0f} steps/s  "
+                f"return {metrics['train/episode_return']:8.2f}  "
+                f"train success {metrics['train/success']:.2f}"
+            )
+            if "eval/success" in row:
+                line += f"  eval success {row['eval/success']:.2f} (end {row['eval/success_final']:.2f})"
+            line += f"  left ~{remaining / 60:.0f} min"
+            print(line, file=out, flush=True)
+            if evaluate or out_of_time:
+                save(epoch)
+            if out_of_time:
+                stop_reason = "max_minutes"
+                break
+    except KeyboardInterrupt:
+        stop_reason = "interrupted"
+        print(f"\ninterrupted; the last checkpoint (epoch {last_saved}) is in {ckpt_dir}", file=out)
+    finally:
+        log.close()
+        plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo}, {config.reward})")
+    evals = [r for r in log.rows if "eval/success" in r]
+    return {
+        "run_dir": str(run_dir),
+        "stop_reason": stop_reason,
+        "epochs": int(log.rows[-1]["epoch"]) if log.rows else start_epoch,
+        "last_checkpoint": last_saved,
+        "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")} if evals else {},
+        "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
+    }

@@ -1,0 +1,206 @@
+"""The training loop of train.py: logs, checkpoints, resume, divergence, bad input.
+
+Most tests drive :func:`mjx_hands.training.run` with the pure-JAX point-reach task
+(``env_factory``) so they compile in seconds; one runs ``train.py`` end to end on the
+hand environment with a tiny budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mjx_hands import checkpoint, training
+from mjx_hands.agents.ddpg import DDPGConfig
+from mjx_hands.env import BatchedEnv
+from mjx_hands.point_reach import PointReach
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SMALL = DDPGConfig(
+    hidden_sizes=(32, 32),
+    batch_size=64,
+    replay_capacity=4_000,
+    min_replay_size=160,
+    unroll_length=5,
+    updates_per_iteration=4,
+    iterations_per_epoch=4,
+)
+
+
+def point_factory(config: training.TrainConfig, num_devices: int, env_class=PointReach):
+    single = env_class()
+    return (
+        BatchedEnv(single, config.num_envs // num_devices),
+        BatchedEnv(single, config.eval_envs // num_devices),
+        single,
+    )
+
+
+def _config(run_dir: Path, **overrides) -> training.TrainConfig:
+    base = training.TrainConfig(
+        num_envs=16, eval_envs=16, epochs=4, eval_every=2, run_dir=str(run_dir), ddpg=SMALL
+    )
+    return dataclasses.replace(base, **overrides)
+
+
+def _learner(run_dir: Path) -> dict:
+    meta = checkpoint.read_metadata(run_dir / "checkpoints")
+    config = training.config_from_json(meta["config"])
+    algo, _ = training.make_learner(config, env_factory=point_factory)
+    state = algo.init(jax.random.PRNGKey(0))
+    tree, _ = checkpoint.restore(
+        run_dir / "checkpoints", training._checkpoint_tree(state, algo, config.save_replay)
+    )
+    return tree
+
+
+def test_resume_equals_an_uninterrupted_run(tmp_path):
+    full = training.run(_config(tmp_path / "full"), out=io.StringIO(), env_factory=point_factory)
+    assert full["epochs"] == 4 and full["last_checkpoint"] == 4
+
+    half = training.run(
+        _config(tmp_path / "split", epochs=2), out=io.StringIO(), env_factory=point_factory
+    )
+    assert half["last_checkpoint"] == 2
+    log = io.StringIO()
+    resumed = training.run(
+        _config(tmp_path / "split", resume=True), out=log, env_factory=point_factory
+    )
+    assert "resumed from epoch 2" in log.getvalue()
+    assert resumed["epochs"] == 4
+
+    a, b = _learner(tmp_path / "full"), _learner(tmp_path / "split")
+    assert int(a["learner"].updates) == int(b["learner"].updates) > 0
+    for x, y in zip(jax.tree.leaves(a["learner"]), jax.tree.leaves(b["learner"])):
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(a["buffer"].data.obs, b["buffer"].data.obs)
+
+    rows = (tmp_path / "split" / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4  # header + one row per epoch, none repeated by the resume
+    full_rows = (tmp_path / "full" / "metrics.csv").read_text().splitlines()
+    header = full_rows[0].split(",")
+    column = header.index("train/episode_return")
+    assert [r.split(",")[column] for r in rows[1:]] == [r.split(",")[column] for r in full_rows[1:]]
+
+
+def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_path):
+    run_dir = tmp_path / "run"
+    training.run(_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
+    assert training.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
+    rows = (run_dir / "metrics.csv").read_text().splitlines()
+    assert "eval/success" in rows[0] and len(rows) == 3
+    assert list((run_dir / "tensorboard").glob("events.out.tfevents.*"))
+    assert checkpoint.latest_step(run_dir / "checkpoints") == 2
+    png = (run_dir / "success.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_existing_run_is_not_overwritten_without_resume(tmp_path):
+    run_dir = tmp_path / "run"
+    training.run(_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    with pytest.raises(FileExistsError, match="--resume"):
+        training.run(_config(run_dir, epochs=1), out=io.StringIO(), env_factory=point_factory)
+    # Resuming with different networks is refused with the offending setting named.
+    other = dataclasses.replace(SMALL, hidden_sizes=(16, 16))
+    with pytest.raises(checkpoint.CheckpointError, match="ddpg.hidden_sizes"):
+        training.run(_config(run_dir, ddpg=other, resume=True), out=io.StringIO(),
+                     env_factory=point_factory)
+
+
+def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
+    run_dir = tmp_path / "run"
+    training.run(_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
+    algo, _ = training.make_learner(config, env_factory=point_factory)
+    like = training._checkpoint_tree(algo.init(jax.random.PRNGKey(0)), algo, True)
+    with pytest.raises(checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"):
+        checkpoint.restore(run_dir / "checkpoints", like)
+
+
+class ExplodingReach(PointReach):
+    """Rewards turn to NaN: the learner's losses diverge on the first update."""
+
+    def step(self, state, action):
+        state = super().step(state, action)
+        return state.replace(reward=state.reward * jnp.nan)
+
+
+def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
+    run_dir = tmp_path / "run"
+    training.run(_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    before = _learner(run_dir)
+
+    def exploding(config, num_devices):
+        return point_factory(config, num_devices, env_class=ExplodingReach)
+
+    with pytest.raises(training.TrainingDiverged, match=r"epoch 3.*last good checkpoint \(epoch 2\)"):
+        training.run(_config(run_dir, epochs=4, eval_every=1, resume=True), out=io.StringIO(),
+                     env_factory=exploding)
+    assert checkpoint.latest_step(run_dir / "checkpoints") == 2
+    after = _learner(run_dir)
+    for x, y in zip(jax.tree.leaves(before["learner"]), jax.tree.leaves(after["learner"])):
+        np.testing.assert_array_equal(x, y)
+        assert np.isfinite(x).all()
+
+
+def _train_py(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "train.py"), *args], cwd=ROOT, capture_output=True,
+        text=True, timeout=timeout,
+    )
+
+
+def test_train_py_help_lists_the_typed_options():
+    result = _train_py("--help", timeout=120)
+    assert result.returncode == 0, result.stderr
+    for option in ("--task", "--reward", "--no-imitation", "--num-envs", "--resume",
+                   "--ddpg.batch-size", "--algo"):
+        assert option in result.stdout
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--task", "wave"], "wave"),
+        (["--num-envs", "0"], "--num-envs must be positive"),
+        (["--mocap", "/nonexistent/mocap", "--mocap-source", "optitrack"], "/nonexistent/mocap"),
+    ],
+)
+def test_train_py_bad_input_gets_a_message_not_a_traceback(args, message, tmp_path):
+    result = _train_py(*args, "--run-dir", str(tmp_path / "r"), timeout=300)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert message in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_train_py_end_to_end_on_the_hand_task(tmp_path):
+    """The real command on the hand environment with a tiny budget (compiles dominate)."""
+    run_dir = tmp_path / "hand"
+    result = _train_py(
+        "--task", "handshake", "--mocap-source", "synthetic", "--preset", "cpu",
+        "--num-envs", "8", "--eval-envs", "8", "--epochs", "2", "--eval-every", "1",
+        "--ddpg.unroll-length", "4", "--ddpg.iterations-per-epoch", "2",
+        "--ddpg.updates-per-iteration", "2", "--ddpg.batch-size", "32",
+        "--ddpg.min-replay-size", "32", "--ddpg.replay-capacity", "512",
+        "--run-dir", str(run_dir),
+    )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
+    assert "epoch    2/2" in result.stdout and "eval success" in result.stdout
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["task"] == "handshake" and config["num_envs"] == 8
+    rows = (run_dir / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 3 and "eval/success" in rows[0]
+    assert checkpoint.latest_step(run_dir / "checkpoints") == 2
+    assert (run_dir / "success.png").stat().st_size > 1000
