@@ -346,7 +346,8 @@ class HandInteractionEnv(Env):
         # A diverged simulation ends its episode; its numbers must not reach the learner.
         obs = jnp.where(finite, self._observation(features, episode), 0.0)
         reward = jnp.where(finite, terms["total"], 0.0)
-        metrics = {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
+        metrics = dict(state.metrics)  # entries that wrappers (e.g. Brax's) added stay
+        metrics |= {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
         metrics["success"] = success
         info = dict(state.info)
         info.update(

@@ -86,7 +86,7 @@ class PointReach(Env):
             obs=self._obs(pos, episode.goal),
             reward=-distance,
             done=done,
-            metrics={"distance": distance},
+            metrics=state.metrics | {"distance": distance},  # keep wrappers' entries
             info=info,
         )
 

@@ -320,7 +320,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     if config.algo != "ddpg":
         from mjx_hands import brax_agents
 
-        return brax_agents.run(config, run_dir, out=out)
+        return brax_agents.run(config, run_dir, out=out, env_factory=env_factory)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path.write_text(json.dumps(config_to_json(config), indent=2))

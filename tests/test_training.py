@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -185,9 +186,10 @@ def test_train_py_bad_input_gets_a_message_not_a_traceback(args, message, tmp_pa
     assert "Traceback" not in result.stderr
 
 
-def test_train_py_end_to_end_on_the_hand_task(tmp_path):
-    """The real command on the hand environment with a tiny budget (compiles dominate)."""
-    run_dir = tmp_path / "hand"
+@pytest.fixture(scope="module")
+def hand_run(tmp_path_factory):
+    """train.py on the hand environment with a tiny budget (compiles dominate: minutes)."""
+    run_dir = tmp_path_factory.mktemp("hand") / "run"
     result = _train_py(
         "--task", "handshake", "--mocap-source", "synthetic", "--preset", "cpu",
         "--num-envs", "8", "--eval-envs", "8", "--epochs", "2", "--eval-every", "1",
@@ -196,6 +198,11 @@ def test_train_py_end_to_end_on_the_hand_task(tmp_path):
         "--ddpg.min-replay-size", "32", "--ddpg.replay-capacity", "512",
         "--run-dir", str(run_dir),
     )
+    return run_dir, result
+
+
+def test_train_py_end_to_end_on_the_hand_task(hand_run):
+    run_dir, result = hand_run
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     assert "epoch    2/2" in result.stdout and "eval success" in result.stdout
     config = json.loads((run_dir / "config.json").read_text())
@@ -204,3 +211,41 @@ def test_train_py_end_to_end_on_the_hand_task(tmp_path):
     assert len(rows) == 3 and "eval/success" in rows[0]
     assert checkpoint.latest_step(run_dir / "checkpoints") == 2
     assert (run_dir / "success.png").stat().st_size > 1000
+
+
+def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    evaluation = subprocess.run(
+        [sys.executable, "-m", "mjx_hands.evaluate", str(run_dir), "--episodes", "8",
+         "--video-episodes", "1", "--width", "160", "--height", "120"],
+        cwd=ROOT, capture_output=True, text=True, timeout=900,
+        env=dict(os.environ, MUJOCO_GL="egl"),
+    )
+    assert evaluation.returncode == 0, evaluation.stdout[-2000:] + evaluation.stderr[-4000:]
+    summary = json.loads((run_dir / "eval.json").read_text())
+    assert summary["episodes"] == 8 and 0.0 <= summary["eval/success"] <= 1.0
+    assert np.isfinite(summary["eval/episode_return"])
+    video = (run_dir / "eval.mp4").read_bytes()
+    assert video[4:8] == b"ftyp" and len(video) > 5000
+
+
+def test_evaluate_names_a_missing_run():
+    result = subprocess.run(
+        [sys.executable, "-m", "mjx_hands.evaluate", "/nonexistent/run"], cwd=ROOT,
+        capture_output=True, text=True, timeout=300,
+    )
+    assert result.returncode == 2 and "/nonexistent/run" in result.stderr
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
+    run_dir = tmp_path / algo
+    config = _config(run_dir, algo=algo, epochs=4, eval_every=2,
+                     ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000))
+    summary = training.run(config, out=io.StringIO(), env_factory=point_factory)
+    assert 0.0 <= summary["final_eval"]["eval/success"] <= 1.0
+    assert np.isfinite(summary["final_eval"]["eval/episode_return"])
+    assert (run_dir / "brax_params.pkl").stat().st_size > 0
+    rows = (run_dir / "metrics.csv").read_text().splitlines()
+    assert len(rows) >= 3 and "eval/episode_reward" in rows[0]

@@ -380,7 +380,11 @@ class DDPG:
         Returns mean episode return, ``success`` (the required contacts all touched at
         some step) and ``success_final`` (they touch at the last step).
         """
-        metrics = self._evaluate(state.learner, jax.random.split(rng, self.num_devices))
+        return self.evaluate_learner(state.learner, rng)
+
+    def evaluate_learner(self, learner: LearnerState, rng: jax.Array) -> dict[str, float]:
+        """:meth:`evaluate` of a replicated learner (leaves with a leading device axis)."""
+        metrics = self._evaluate(learner, jax.random.split(rng, self.num_devices))
         return {k: float(v[0]) for k, v in jax.device_get(metrics).items()}
 
     def _evaluate_device(self, learner: LearnerState, rng: jax.Array):

@@ -1,0 +1,119 @@
+"""Brax's own SAC and PPO trainers on the same task, for comparison with DDPG.
+
+The hand environment speaks Brax's ``Env`` API, so Brax's trainers run it unchanged
+(Brax wraps it with its own vmap, episode and auto-reset wrappers). The environment
+budget equals DDPG's for the same config: ``epochs × num_envs × unroll_length ×
+iterations_per_epoch`` steps; ``eval_every`` sets how many evaluations Brax runs.
+Networks are 3×256 like DDPG's. After training the deterministic policy is evaluated
+with the same success measure as DDPG (:func:`mjx_hands.evaluate.rollout`) and the
+parameters are saved with ``brax.io.model`` as ``RUN_DIR/brax_params.pkl``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+
+def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+    from brax.io import model as brax_model
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as ppo
+    from brax.training.agents.sac import networks as sac_networks
+    from brax.training.agents.sac import train as sac
+
+    from mjx_hands import training
+    from mjx_hands.evaluate import rollout
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.json").write_text(json.dumps(training.config_to_json(config), indent=2))
+    _, _, single = (env_factory or training.make_envs)(config, 1)
+    episode_length = single.episode_length
+    ddpg = config.ddpg
+    num_timesteps = config.epochs * config.num_envs * ddpg.unroll_length * ddpg.iterations_per_epoch
+    num_evals = max(2, config.epochs // config.eval_every + 1)
+    gamma = ddpg.discount if ddpg.discount is not None else 1.0 - 1.0 / episode_length
+    log = training.MetricsLog(run_dir)
+    started = time.perf_counter()
+
+    def progress(steps: int, metrics: dict[str, Any]) -> None:
+        row = {"train/env_steps": float(steps), "time/seconds": time.perf_counter() - started}
+        row |= {k: float(np.asarray(v)) for k, v in metrics.items() if np.ndim(v) == 0}
+        row["epoch"] = float(len(log.rows) + 1)
+        log.append(row)
+        reward = row.get("eval/episode_reward", float("nan"))
+        print(f"{config.algo} {steps:>10,d} steps  eval return {reward:8.2f}  "
+              f"{row['time/seconds']:.0f} s", file=out, flush=True)
+
+    common = dict(
+        environment=single,
+        num_timesteps=num_timesteps,
+        episode_length=episode_length,
+        num_envs=config.num_envs,
+        num_eval_envs=config.eval_envs,
+        discounting=gamma,
+        seed=config.seed,
+        num_evals=num_evals,
+        normalize_observations=True,
+        progress_fn=progress,
+    )
+    hidden = tuple(ddpg.hidden_sizes)
+    if config.algo == "ppo":
+        make_policy, params, _ = ppo.train(
+            **common,
+            learning_rate=3e-4,
+            unroll_length=ddpg.unroll_length,
+            batch_size=max(config.num_envs // 4, 1),
+            num_minibatches=4,
+            num_updates_per_batch=4,
+            entropy_cost=1e-3,
+            network_factory=functools.partial(
+                ppo_networks.make_ppo_networks,
+                policy_hidden_layer_sizes=hidden, value_hidden_layer_sizes=hidden,
+            ),
+        )
+    elif config.algo == "sac":
+        make_policy, params, _ = sac.train(
+            **common,
+            learning_rate=ddpg.critic_learning_rate,
+            batch_size=ddpg.batch_size,
+            min_replay_size=ddpg.min_replay_size,
+            max_replay_size=ddpg.replay_capacity,
+            grad_updates_per_step=max(
+                1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)
+            ),
+            network_factory=functools.partial(
+                sac_networks.make_sac_networks, hidden_layer_sizes=hidden
+            ),
+        )
+    else:
+        raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected sac or ppo")
+    brax_model.save_params(str(run_dir / "brax_params.pkl"), params)
+
+    policy = make_policy(params, deterministic=True)
+    act = lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
+    trajectory = rollout(single, act, config.eval_envs, jax.random.PRNGKey(config.seed + 1))
+    final = {
+        "eval/episode_return": float(trajectory["reward"].sum(0).mean()),
+        "eval/success": float(trajectory["success"].max(0).mean()),
+        "eval/success_final": float(trajectory["success"][-1].mean()),
+    }
+    log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
+    log.close()
+    training.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
+    print(f"{config.algo}: success {final['eval/success']:.2f}", file=out, flush=True)
+    return {
+        "run_dir": str(run_dir),
+        "stop_reason": "epochs",
+        "epochs": config.epochs,
+        "last_checkpoint": None,
+        "final_eval": final,
+        "best_eval_success": final["eval/success"],
+    }
