@@ -37,8 +37,13 @@ def main(argv: list[str] | None = None) -> int:
     except training.TrainingDiverged as err:
         print(f"error: {err}", file=sys.stderr)
         return 3
-    except (ValueError, MocapError, checkpoint.CheckpointError, FileNotFoundError,
-            FileExistsError) as err:
+    except (
+        ValueError,
+        MocapError,
+        checkpoint.CheckpointError,
+        FileNotFoundError,
+        FileExistsError,
+    ) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     final = summary["final_eval"]

@@ -49,8 +49,12 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
         row["epoch"] = float(len(log.rows) + 1)
         log.append(row)
         reward = row.get("eval/episode_reward", float("nan"))
-        print(f"{config.algo} {steps:>10,d} steps  eval return {reward:8.2f}  "
-              f"{row['time/seconds']:.0f} s", file=out, flush=True)
+        print(
+            f"{config.algo} {steps:>10,d} steps  eval return {reward:8.2f}  "
+            f"{row['time/seconds']:.0f} s",
+            file=out,
+            flush=True,
+        )
 
     common = dict(
         environment=single,
@@ -76,7 +80,8 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
             entropy_cost=1e-3,
             network_factory=functools.partial(
                 ppo_networks.make_ppo_networks,
-                policy_hidden_layer_sizes=hidden, value_hidden_layer_sizes=hidden,
+                policy_hidden_layer_sizes=hidden,
+                value_hidden_layer_sizes=hidden,
             ),
         )
     elif config.algo == "sac":
@@ -86,9 +91,7 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
             batch_size=ddpg.batch_size,
             min_replay_size=ddpg.min_replay_size,
             max_replay_size=ddpg.replay_capacity,
-            grad_updates_per_step=max(
-                1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)
-            ),
+            grad_updates_per_step=max(1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)),
             network_factory=functools.partial(
                 sac_networks.make_sac_networks, hidden_layer_sizes=hidden
             ),

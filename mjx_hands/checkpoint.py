@@ -41,7 +41,8 @@ def save(directory: Path, step: int, state, metadata: dict[str, Any]) -> None:
     record["leaves"] = [
         {"path": p, "shape": list(x.shape), "dtype": str(x.dtype)} for p, x in zip(paths, leaves)
     ]
-    arrays = {f"leaf_{i:05d}": x for i, x in enumerate(leaves)}
+    # Orbax refuses empty arrays (MJX data has some); their shape in the record suffices.
+    arrays = {f"leaf_{i:05d}": x for i, x in enumerate(leaves) if x.size}
     with _manager(directory) as manager:
         manager.save(
             step,
@@ -65,9 +66,7 @@ def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
     """The JSON record of checkpoint ``step`` (default: the latest)."""
     step = _resolve_step(directory, step)
     with _manager(directory) as manager:
-        restored = manager.restore(
-            step, args=ocp.args.Composite(metadata=ocp.args.JsonRestore())
-        )
+        restored = manager.restore(step, args=ocp.args.Composite(metadata=ocp.args.JsonRestore()))
     return dict(restored["metadata"])
 
 
@@ -82,8 +81,12 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
     metadata = read_metadata(directory, step)
     with_path, treedef = jax.tree_util.tree_flatten_with_path(like)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]
-    leaves = [jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype if not hasattr(x, "dtype") else x.dtype)
-              for _, x in with_path]
+    leaves = [
+        jax.ShapeDtypeStruct(
+            np.shape(x), np.asarray(x).dtype if not hasattr(x, "dtype") else x.dtype
+        )
+        for _, x in with_path
+    ]
     saved = metadata.get("leaves", [])
     if len(saved) != len(paths):
         raise CheckpointError(
@@ -91,8 +94,10 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
             f"configuration needs {len(paths)}: it was written by an incompatible config"
         )
     for entry, path, leaf in zip(saved, paths, leaves):
-        if entry["path"] != path or tuple(entry["shape"]) != tuple(leaf.shape) or (
-            entry["dtype"] != str(leaf.dtype)
+        if (
+            entry["path"] != path
+            or tuple(entry["shape"]) != tuple(leaf.shape)
+            or (entry["dtype"] != str(leaf.dtype))
         ):
             raise CheckpointError(
                 f"checkpoint {directory} step {step} is incompatible with the current "
@@ -102,12 +107,18 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
     abstract = {
         f"leaf_{i:05d}": jax.ShapeDtypeStruct(leaf.shape, leaf.dtype)
         for i, leaf in enumerate(leaves)
+        if np.prod(leaf.shape)
     }
     with _manager(directory) as manager:
         restored = manager.restore(
             step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
         )
-    arrays = [np.asarray(restored["state"][f"leaf_{i:05d}"]) for i in range(len(leaves))]
+    arrays = [
+        np.asarray(restored["state"][f"leaf_{i:05d}"])
+        if np.prod(leaf.shape)
+        else np.zeros(leaf.shape, leaf.dtype)
+        for i, leaf in enumerate(leaves)
+    ]
     return jax.tree_util.tree_unflatten(treedef, arrays), metadata
 
 

@@ -61,7 +61,9 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
         )
     algo, single = training.make_learner(config, devices=devices)
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
-    tree, _ = checkpoint.restore(ckpt_dir, training._checkpoint_tree(like, algo, config.save_replay), step)
+    tree, _ = checkpoint.restore(
+        ckpt_dir, training._checkpoint_tree(like, algo, config.save_replay), step
+    )
     return algo, tree["learner"], config, single
 
 
@@ -134,8 +136,15 @@ def main(argv: list[str] | None = None) -> int:
         policy = lambda obs: algo.policy(learner, obs)
         trajectory = rollout(single, policy, args.video_episodes, jax.random.PRNGKey(args.seed + 1))
         video = Path(args.video or run_dir / "eval.mp4")
-        render_video(single, trajectory, video, args.camera, args.width, args.height,
-                     fps=1.0 / single.config.control_dt)
+        render_video(
+            single,
+            trajectory,
+            video,
+            args.camera,
+            args.width,
+            args.height,
+            fps=1.0 / single.config.control_dt,
+        )
         print(f"video: {video} ({args.video_episodes} episodes, camera {args.camera!r})")
     return 0
 

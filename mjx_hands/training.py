@@ -73,7 +73,9 @@ class TrainConfig:
         problems = []
         for name in ("num_envs", "epochs", "eval_every", "eval_envs"):
             if getattr(self, name) <= 0:
-                problems.append(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+                problems.append(
+                    f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}"
+                )
         if self.max_minutes is not None and self.max_minutes <= 0:
             problems.append(f"--max-minutes must be positive, got {self.max_minutes}")
         if self.target_rotation_noise < 0:
@@ -131,8 +133,10 @@ def make_envs(config: TrainConfig, num_devices: int):
                 f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
                 f"the {num_devices} devices"
             )
-    variant = config.reward if config.imitation else (
-        "no_imitation" if config.reward == "full" else config.reward
+    variant = (
+        config.reward
+        if config.imitation
+        else ("no_imitation" if config.reward == "full" else config.reward)
     )
     from mjx_hands import reward_params
 
@@ -181,7 +185,9 @@ class MetricsLog:
         self.rows: list[dict[str, float]] = []
         if self.path.exists():
             with self.path.open() as f:
-                self.rows = [{k: float(v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)]
+                self.rows = [
+                    {k: float(v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)
+                ]
         try:
             from tensorboardX import SummaryWriter
 
@@ -277,8 +283,17 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
 
 # Settings a resumed run must share with its checkpoint: they fix the task, the
 # networks' and buffers' shapes. Everything else (learning rates, budget) may change.
-RESUME_FIXED = ("task", "reward", "imitation", "mocap_source", "num_envs", "algo",
-                "ddpg.hidden_sizes", "ddpg.layer_norm", "ddpg.replay_capacity")
+RESUME_FIXED = (
+    "task",
+    "reward",
+    "imitation",
+    "mocap_source",
+    "num_envs",
+    "algo",
+    "ddpg.hidden_sizes",
+    "ddpg.layer_norm",
+    "ddpg.replay_capacity",
+)
 
 
 def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
@@ -306,12 +321,16 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment).
     """
-    run_dir = Path(config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}")
+    run_dir = Path(
+        config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
+    )
     ckpt_dir = run_dir / "checkpoints"
     config_path = run_dir / "config.json"
     if config.resume:
         if not config_path.is_file():
-            raise FileNotFoundError(f"--resume: no run to continue in {run_dir} (config.json missing)")
+            raise FileNotFoundError(
+                f"--resume: no run to continue in {run_dir} (config.json missing)"
+            )
         _check_resumable(json.loads(config_path.read_text()), config, run_dir)
     elif config_path.exists() and checkpoint.latest_step(ckpt_dir) is not None:
         raise FileExistsError(
@@ -365,14 +384,21 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
                 math.isfinite(v) for k, v in metrics.items() if k.startswith("sgd/")
             )
             if not losses_finite or metrics["train/params_finite"] < 1.0:
-                bad = {k: v for k, v in metrics.items() if k.startswith("sgd/") and not math.isfinite(v)}
+                bad = {
+                    k: v
+                    for k, v in metrics.items()
+                    if k.startswith("sgd/") and not math.isfinite(v)
+                }
                 raise TrainingDiverged(
                     f"epoch {epoch}: training diverged (non-finite {sorted(bad) or 'parameters'}); "
                     f"the last good checkpoint (epoch {last_saved}) is in {ckpt_dir}; "
                     "lower the learning rates or enable --ddpg.layer-norm and --resume"
                 )
-            row = {"epoch": float(epoch), "time/epoch_seconds": seconds,
-                   "time/env_steps_per_second": steps_per_epoch / seconds} | metrics
+            row = {
+                "epoch": float(epoch),
+                "time/epoch_seconds": seconds,
+                "time/env_steps_per_second": steps_per_epoch / seconds,
+            } | metrics
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
@@ -400,13 +426,17 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         print(f"\ninterrupted; the last checkpoint (epoch {last_saved}) is in {ckpt_dir}", file=out)
     finally:
         log.close()
-        plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo}, {config.reward})")
+        plot_success(
+            log.rows, run_dir / "success.png", f"{config.task} ({config.algo}, {config.reward})"
+        )
     evals = [r for r in log.rows if "eval/success" in r]
     return {
         "run_dir": str(run_dir),
         "stop_reason": stop_reason,
         "epochs": int(log.rows[-1]["epoch"]) if log.rows else start_epoch,
         "last_checkpoint": last_saved,
-        "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")} if evals else {},
+        "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")}
+        if evals
+        else {},
         "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
     }

@@ -79,12 +79,16 @@ def test_critic_target_matches_bellman_equation():
     rng = np.random.default_rng(0)
     reward, next_q = rng.normal(size=64), rng.normal(size=64)
     discount = (rng.random(64) > 0.3).astype(np.float64)
-    got = losses.critic_target(jnp.asarray(reward), jnp.asarray(discount), jnp.asarray(next_q), 0.99)
+    got = losses.critic_target(
+        jnp.asarray(reward), jnp.asarray(discount), jnp.asarray(next_q), 0.99
+    )
     np.testing.assert_allclose(got, reward + 0.99 * discount * next_q, rtol=1e-5, atol=1e-6)
     clipped = losses.critic_target(
         jnp.asarray(reward), jnp.asarray(discount), jnp.asarray(next_q), 0.99, clip=(-0.5, 0.0)
     )
-    np.testing.assert_allclose(clipped, np.clip(reward + 0.99 * discount * next_q, -0.5, 0.0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        clipped, np.clip(reward + 0.99 * discount * next_q, -0.5, 0.0), rtol=1e-5, atol=1e-6
+    )
 
 
 def test_collected_transitions_bootstrap_truncation_but_not_termination():
@@ -177,8 +181,12 @@ def test_invalid_config_is_refused_with_the_field_named():
     with pytest.raises(ValueError, match="polyak=1.5"):
         DDPGConfig(polyak=1.5)
     with pytest.raises(ValueError, match="batch_size=255 is not divisible"):
-        DDPG(make_point_reach(4), DDPGConfig(batch_size=255), episode_length=20,
-             devices=jax.local_devices() * 0 + [jax.local_devices()[0]] * 2)
+        DDPG(
+            make_point_reach(4),
+            DDPGConfig(batch_size=255),
+            episode_length=20,
+            devices=jax.local_devices() * 0 + [jax.local_devices()[0]] * 2,
+        )
 
 
 TWO_DEVICE_SCRIPT = textwrap.dedent(
@@ -206,11 +214,17 @@ TWO_DEVICE_SCRIPT = textwrap.dedent(
 
 
 def test_two_cpu_devices_train_in_step(tmp_path):
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    env = dict(
+        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu"
+    )
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     result = subprocess.run(
-        [sys.executable, "-c", TWO_DEVICE_SCRIPT], cwd=root, env=env, capture_output=True,
-        text=True, timeout=600,
+        [sys.executable, "-c", TWO_DEVICE_SCRIPT],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     assert "EVAL" in result.stdout

@@ -96,7 +96,9 @@ def test_resume_equals_an_uninterrupted_run(tmp_path):
 
 def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_path):
     run_dir = tmp_path / "run"
-    training.run(_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    training.run(
+        _config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
+    )
     config = json.loads((run_dir / "config.json").read_text())
     assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
     assert training.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
@@ -110,23 +112,30 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
 
 def test_existing_run_is_not_overwritten_without_resume(tmp_path):
     run_dir = tmp_path / "run"
-    training.run(_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    training.run(
+        _config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
+    )
     with pytest.raises(FileExistsError, match="--resume"):
         training.run(_config(run_dir, epochs=1), out=io.StringIO(), env_factory=point_factory)
     # Resuming with different networks is refused with the offending setting named.
     other = dataclasses.replace(SMALL, hidden_sizes=(16, 16))
     with pytest.raises(checkpoint.CheckpointError, match="ddpg.hidden_sizes"):
-        training.run(_config(run_dir, ddpg=other, resume=True), out=io.StringIO(),
-                     env_factory=point_factory)
+        training.run(
+            _config(run_dir, ddpg=other, resume=True), out=io.StringIO(), env_factory=point_factory
+        )
 
 
 def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     run_dir = tmp_path / "run"
-    training.run(_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    training.run(
+        _config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
+    )
     config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
     algo, _ = training.make_learner(config, env_factory=point_factory)
     like = training._checkpoint_tree(algo.init(jax.random.PRNGKey(0)), algo, True)
-    with pytest.raises(checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"):
+    with pytest.raises(
+        checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"
+    ):
         checkpoint.restore(run_dir / "checkpoints", like)
 
 
@@ -140,15 +149,22 @@ class ExplodingReach(PointReach):
 
 def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     run_dir = tmp_path / "run"
-    training.run(_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory)
+    training.run(
+        _config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
+    )
     before = _learner(run_dir)
 
     def exploding(config, num_devices):
         return point_factory(config, num_devices, env_class=ExplodingReach)
 
-    with pytest.raises(training.TrainingDiverged, match=r"epoch 3.*last good checkpoint \(epoch 2\)"):
-        training.run(_config(run_dir, epochs=4, eval_every=1, resume=True), out=io.StringIO(),
-                     env_factory=exploding)
+    with pytest.raises(
+        training.TrainingDiverged, match=r"epoch 3.*last good checkpoint \(epoch 2\)"
+    ):
+        training.run(
+            _config(run_dir, epochs=4, eval_every=1, resume=True),
+            out=io.StringIO(),
+            env_factory=exploding,
+        )
     assert checkpoint.latest_step(run_dir / "checkpoints") == 2
     after = _learner(run_dir)
     for x, y in zip(jax.tree.leaves(before["learner"]), jax.tree.leaves(after["learner"])):
@@ -158,16 +174,26 @@ def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
 
 def _train_py(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, str(ROOT / "train.py"), *args], cwd=ROOT, capture_output=True,
-        text=True, timeout=timeout,
+        [sys.executable, str(ROOT / "train.py"), *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
     )
 
 
 def test_train_py_help_lists_the_typed_options():
     result = _train_py("--help", timeout=120)
     assert result.returncode == 0, result.stderr
-    for option in ("--task", "--reward", "--no-imitation", "--num-envs", "--resume",
-                   "--ddpg.batch-size", "--algo"):
+    for option in (
+        "--task",
+        "--reward",
+        "--no-imitation",
+        "--num-envs",
+        "--resume",
+        "--ddpg.batch-size",
+        "--algo",
+    ):
         assert option in result.stdout
 
 
@@ -191,12 +217,34 @@ def hand_run(tmp_path_factory):
     """train.py on the hand environment with a tiny budget (compiles dominate: minutes)."""
     run_dir = tmp_path_factory.mktemp("hand") / "run"
     result = _train_py(
-        "--task", "handshake", "--mocap-source", "synthetic", "--preset", "cpu",
-        "--num-envs", "8", "--eval-envs", "8", "--epochs", "2", "--eval-every", "1",
-        "--ddpg.unroll-length", "4", "--ddpg.iterations-per-epoch", "2",
-        "--ddpg.updates-per-iteration", "2", "--ddpg.batch-size", "32",
-        "--ddpg.min-replay-size", "32", "--ddpg.replay-capacity", "512",
-        "--run-dir", str(run_dir),
+        "--task",
+        "handshake",
+        "--mocap-source",
+        "synthetic",
+        "--preset",
+        "cpu",
+        "--num-envs",
+        "8",
+        "--eval-envs",
+        "8",
+        "--epochs",
+        "2",
+        "--eval-every",
+        "1",
+        "--ddpg.unroll-length",
+        "4",
+        "--ddpg.iterations-per-epoch",
+        "2",
+        "--ddpg.updates-per-iteration",
+        "2",
+        "--ddpg.batch-size",
+        "32",
+        "--ddpg.min-replay-size",
+        "32",
+        "--ddpg.replay-capacity",
+        "512",
+        "--run-dir",
+        str(run_dir),
     )
     return run_dir, result
 
@@ -217,9 +265,24 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
     run_dir, result = hand_run
     assert result.returncode == 0
     evaluation = subprocess.run(
-        [sys.executable, "-m", "mjx_hands.evaluate", str(run_dir), "--episodes", "8",
-         "--video-episodes", "1", "--width", "160", "--height", "120"],
-        cwd=ROOT, capture_output=True, text=True, timeout=900,
+        [
+            sys.executable,
+            "-m",
+            "mjx_hands.evaluate",
+            str(run_dir),
+            "--episodes",
+            "8",
+            "--video-episodes",
+            "1",
+            "--width",
+            "160",
+            "--height",
+            "120",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
         env=dict(os.environ, MUJOCO_GL="egl"),
     )
     assert evaluation.returncode == 0, evaluation.stdout[-2000:] + evaluation.stderr[-4000:]
@@ -232,8 +295,11 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
 
 def test_evaluate_names_a_missing_run():
     result = subprocess.run(
-        [sys.executable, "-m", "mjx_hands.evaluate", "/nonexistent/run"], cwd=ROOT,
-        capture_output=True, text=True, timeout=300,
+        [sys.executable, "-m", "mjx_hands.evaluate", "/nonexistent/run"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert result.returncode == 2 and "/nonexistent/run" in result.stderr
 
@@ -241,11 +307,31 @@ def test_evaluate_names_a_missing_run():
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
     run_dir = tmp_path / algo
-    config = _config(run_dir, algo=algo, epochs=4, eval_every=2,
-                     ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000))
+    config = _config(
+        run_dir,
+        algo=algo,
+        epochs=4,
+        eval_every=2,
+        ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000),
+    )
     summary = training.run(config, out=io.StringIO(), env_factory=point_factory)
     assert 0.0 <= summary["final_eval"]["eval/success"] <= 1.0
     assert np.isfinite(summary["final_eval"]["eval/episode_return"])
     assert (run_dir / "brax_params.pkl").stat().st_size > 0
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert len(rows) >= 3 and "eval/episode_reward" in rows[0]
+
+
+def test_checkpoint_round_trips_empty_and_nested_arrays(tmp_path):
+    """MJX data holds zero-size arrays; Orbax alone refuses them."""
+    tree = {
+        "a": np.arange(6, dtype=np.float32).reshape(2, 3),
+        "empty": np.zeros((4, 0, 3), np.float32),
+        "nested": (np.int32(7), np.zeros((0,), np.int32)),
+    }
+    checkpoint.save(tmp_path, 3, tree, {"epoch": 3})
+    restored, meta = checkpoint.restore(tmp_path, tree)
+    assert meta["epoch"] == 3
+    for x, y in zip(jax.tree.leaves(tree), jax.tree.leaves(restored), strict=True):
+        assert np.shape(x) == np.shape(y) and np.asarray(x).dtype == np.asarray(y).dtype
+        np.testing.assert_array_equal(x, y)

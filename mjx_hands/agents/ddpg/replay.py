@@ -45,9 +45,11 @@ def create(capacity: int, example: Transition) -> ReplayBuffer:
     """An empty buffer for transitions shaped like ``example`` (one, unbatched)."""
     if capacity <= 0:
         raise ValueError(f"replay capacity must be positive, got {capacity}")
-    data = jax.tree.map(lambda x: jnp.zeros((capacity,) + jnp.shape(x), jnp.asarray(x).dtype), example)
-    zero = jnp.zeros((), jnp.int32)
-    return ReplayBuffer(data=data, position=zero, size=zero)
+    data = jax.tree.map(
+        lambda x: jnp.zeros((capacity,) + jnp.shape(x), jnp.asarray(x).dtype), example
+    )
+    # Two distinct arrays: one buffer passed twice cannot be donated.
+    return ReplayBuffer(data=data, position=jnp.zeros((), jnp.int32), size=jnp.zeros((), jnp.int32))
 
 
 def insert(buffer: ReplayBuffer, batch: Transition) -> ReplayBuffer:

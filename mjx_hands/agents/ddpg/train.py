@@ -184,7 +184,9 @@ class DDPG:
     def _explore(self, learner: LearnerState, obs: jax.Array, rng: jax.Array) -> jax.Array:
         k_noise, k_random, k_pick = jax.random.split(rng, 3)
         action = self.policy(learner, obs)
-        action = jnp.clip(action + self.config.noise_scale * jax.random.normal(k_noise, action.shape), -1, 1)
+        action = jnp.clip(
+            action + self.config.noise_scale * jax.random.normal(k_noise, action.shape), -1, 1
+        )
         random = jax.random.uniform(k_random, action.shape, minval=-1.0, maxval=1.0)
         pick = jax.random.uniform(k_pick, action.shape[:-1] + (1,)) < self.config.random_action_prob
         return jnp.where(pick, random, action)
@@ -251,8 +253,8 @@ class DDPG:
             ready = buffer.size * self.num_devices >= cfg.min_replay_size
             learner, sgd_metrics = jax.lax.cond(
                 ready,
-                lambda l: self._train(l, buffer, k_sgd),
-                lambda l: (l, self._zero_sgd_metrics()),
+                lambda learner: self._train(learner, buffer, k_sgd),
+                lambda learner: (learner, self._zero_sgd_metrics()),
                 learner,
             )
             state = state.replace(
