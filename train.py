@@ -2,7 +2,8 @@
 
     python train.py --task handshake            # the paper's DDPG, preset by device
     python train.py --task et --no-imitation    # an ablation
-    python train.py --run-dir runs/x --resume   # continue a run
+    python train.py --run-dir runs/x --resume   # continue a run with its own config
+    python train.py --run-dir runs/x --resume --epochs 400   # ... and a larger budget
 
 Everything written goes to the run directory: config.json, metrics.csv, TensorBoard
 events (``tensorboard --logdir runs``), Orbax checkpoints and success.png.
@@ -14,13 +15,29 @@ from __future__ import annotations
 import sys
 
 
-def _preset_name(argv: list[str]) -> str:
+def _option(argv: list[str], name: str) -> str | None:
+    """Value of ``--name V`` or ``--name=V`` in argv, read before the full parse."""
     for i, arg in enumerate(argv):
-        if arg == "--preset" and i + 1 < len(argv):
+        if arg == name and i + 1 < len(argv):
             return argv[i + 1]
-        if arg.startswith("--preset="):
+        if arg.startswith(name + "="):
             return arg.split("=", 1)[1]
-    return "auto"
+    return None
+
+
+def _defaults(argv: list[str]):
+    """The config the command line overrides: a resumed run's own, else the preset's."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from mjx_hands import training
+
+    run_dir = _option(argv, "--run-dir")
+    if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
+        saved = json.loads((Path(run_dir) / "config.json").read_text())
+        return dataclasses.replace(training.config_from_json(saved), resume=False)
+    return training.preset(_option(argv, "--preset") or "auto")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = sys.argv[1:] if argv is None else argv
     try:
-        default = training.preset(_preset_name(argv))
+        default = _defaults(argv)
         config = tyro.cli(training.TrainConfig, default=default, args=argv, description=__doc__)
         summary = training.run(config)
     except training.TrainingDiverged as err:

@@ -292,12 +292,15 @@ RESUME_FIXED = (
     "algo",
     "ddpg.hidden_sizes",
     "ddpg.layer_norm",
+    "ddpg.batch_norm",
     "ddpg.replay_capacity",
 )
 
 
 def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
     current = json.loads(json.dumps(config_to_json(config)))  # tuples as JSON lists
+    # Through the dataclass: settings added since the run started take their defaults.
+    saved = json.loads(json.dumps(config_to_json(config_from_json(saved))))
 
     def get(tree, dotted):
         for part in dotted.split("."):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -228,3 +229,16 @@ def test_two_cpu_devices_train_in_step(tmp_path):
     )
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     assert "EVAL" in result.stdout
+
+
+def test_batch_norm_option_learns_and_keeps_running_statistics():
+    config = dataclasses.replace(POINT_CONFIG, batch_norm=True)
+    algo = DDPG(make_point_reach(32), config, episode_length=20)
+    state = algo.init(jax.random.PRNGKey(0))
+    initial = jax.device_get(state.learner.critic_params["batch_stats"])
+    for _ in range(12):
+        state, _ = algo.run_epoch(state)
+    stats = jax.device_get(state.learner.critic_params["batch_stats"])
+    moved = [np.abs(a - b).max() for a, b in zip(jax.tree.leaves(initial), jax.tree.leaves(stats))]
+    assert min(moved) > 1e-3  # running means and variances follow the minibatches
+    assert algo.evaluate(state, jax.random.PRNGKey(3))["eval/success"] > 0.8

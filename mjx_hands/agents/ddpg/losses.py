@@ -3,6 +3,10 @@
 Critic: squared error to ``y = r + γ · discount · Q'(s', μ'(s'))`` with target
 networks μ', Q'; ``discount`` is 0 only at a true termination, so truncated
 episodes bootstrap. Actor: ``-Q(s, μ(s)) + λ · mean(μ(s)²)``.
+
+The network being trained runs through a *train apply* ``(variables, *inputs) ->
+(output, new_variables)``, which lets batch normalisation use minibatch statistics
+and hand back its updated running averages; by default it is the plain apply.
 """
 
 from __future__ import annotations
@@ -41,14 +45,20 @@ def critic_loss(
     critic_apply: Apply,
     gamma: float,
     target_clip: tuple[float, float] | None = None,
-) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """Mean squared Bellman error on normalised ``batch`` (leaves (batch, ...))."""
+    critic_train_apply: Apply | None = None,
+):
+    """Mean squared Bellman error on normalised ``batch`` (leaves (batch, ...)).
+
+    Returns (loss, (metrics, critic variables after the forward pass)).
+    """
     next_action = actor_apply(target_actor_params, batch.next_obs)
     next_q = critic_apply(target_critic_params, batch.next_obs, next_action)
     target = critic_target(batch.reward, batch.discount, next_q, gamma, target_clip)
-    q = critic_apply(critic_params, batch.obs, batch.action)
+    train_apply = critic_train_apply or _plain(critic_apply)
+    q, new_variables = train_apply(critic_params, batch.obs, batch.action)
     loss = jnp.mean(jnp.square(q - target))
-    return loss, {"critic_loss": loss, "q": q.mean(), "target_q": target.mean()}
+    metrics = {"critic_loss": loss, "q": q.mean(), "target_q": target.mean()}
+    return loss, (metrics, new_variables)
 
 
 def actor_loss(
@@ -59,13 +69,22 @@ def actor_loss(
     actor_apply: Apply,
     critic_apply: Apply,
     action_l2: float,
-) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """``-mean Q(s, μ(s)) + action_l2 · mean(μ(s)²)``; obs (batch, obs) normalised."""
-    action = actor_apply(actor_params, obs)
+    actor_train_apply: Apply | None = None,
+):
+    """``-mean Q(s, μ(s)) + action_l2 · mean(μ(s)²)``; obs (batch, obs) normalised.
+
+    Returns (loss, (metrics, actor variables after the forward pass)).
+    """
+    action, new_variables = (actor_train_apply or _plain(actor_apply))(actor_params, obs)
     q = critic_apply(critic_params, obs, action)
     penalty = action_l2 * jnp.mean(jnp.square(action))
     loss = -q.mean() + penalty
-    return loss, {"actor_loss": loss, "action_penalty": penalty}
+    return loss, ({"actor_loss": loss, "action_penalty": penalty}, new_variables)
+
+
+def _plain(apply: Apply) -> Apply:
+    """A train apply that changes no variables."""
+    return lambda variables, *inputs: (apply(variables, *inputs), variables)
 
 
 def polyak(target, online, coefficient: float):

@@ -15,16 +15,24 @@ from flax import struct
 
 
 class MLP(nn.Module):
-    """ReLU hidden layers, linear output; optional LayerNorm after each hidden layer."""
+    """ReLU hidden layers, linear output; optional batch or layer norm after each hidden layer.
+
+    With ``batch_norm`` the variables hold a ``batch_stats`` collection: ``train=True``
+    normalises by the minibatch (call with ``mutable=['batch_stats']`` to update the
+    running averages), ``train=False`` by the running averages.
+    """
 
     hidden_sizes: Sequence[int]
     out_size: int
     layer_norm: bool = False
+    batch_norm: bool = False
 
     @nn.compact
-    def __call__(self, x: jax.Array) -> jax.Array:
+    def __call__(self, x: jax.Array, train: bool = False) -> jax.Array:
         for size in self.hidden_sizes:
             x = nn.Dense(size)(x)
+            if self.batch_norm:
+                x = nn.BatchNorm(use_running_average=not train, momentum=0.99)(x)
             if self.layer_norm:
                 x = nn.LayerNorm()(x)
             x = nn.relu(x)
@@ -38,10 +46,12 @@ class Actor(nn.Module):
     action_size: int
     hidden_sizes: Sequence[int] = (256, 256, 256)
     layer_norm: bool = False
+    batch_norm: bool = False
 
     @nn.compact
-    def __call__(self, obs: jax.Array) -> jax.Array:
-        return jnp.tanh(MLP(self.hidden_sizes, self.action_size, self.layer_norm)(obs))
+    def __call__(self, obs: jax.Array, train: bool = False) -> jax.Array:
+        mlp = MLP(self.hidden_sizes, self.action_size, self.layer_norm, self.batch_norm)
+        return jnp.tanh(mlp(obs, train))
 
 
 class Critic(nn.Module):
@@ -49,11 +59,12 @@ class Critic(nn.Module):
 
     hidden_sizes: Sequence[int] = (256, 256, 256)
     layer_norm: bool = False
+    batch_norm: bool = False
 
     @nn.compact
-    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+    def __call__(self, obs: jax.Array, action: jax.Array, train: bool = False) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
-        return MLP(self.hidden_sizes, 1, self.layer_norm)(x)[..., 0]
+        return MLP(self.hidden_sizes, 1, self.layer_norm, self.batch_norm)(x, train)[..., 0]
 
 
 @struct.dataclass

@@ -41,6 +41,10 @@ class DDPGConfig:
     """Hidden layers of actor and critic (ReLU)."""
     layer_norm: bool = False
     """LayerNorm after every hidden layer of both networks."""
+    batch_norm: bool = False
+    """Batch normalisation after every hidden layer of both networks, as in the paper
+    (minibatch statistics while training, all-reduced over devices; running averages
+    when acting and in the target networks)."""
     actor_learning_rate: float = 1e-3
     """Adam step size of the actor."""
     critic_learning_rate: float = 1e-3
@@ -160,8 +164,10 @@ class DDPG:
                     f"{self.num_devices} devices"
                 )
         self.gamma = config.discount if config.discount is not None else 1.0 - 1.0 / episode_length
-        self.actor = networks.Actor(env.action_size, config.hidden_sizes, config.layer_norm)
-        self.critic = networks.Critic(config.hidden_sizes, config.layer_norm)
+        self.actor = networks.Actor(
+            env.action_size, config.hidden_sizes, config.layer_norm, config.batch_norm
+        )
+        self.critic = networks.Critic(config.hidden_sizes, config.layer_norm, config.batch_norm)
         self.actor_opt = optax.adam(config.actor_learning_rate)
         self.critic_opt = optax.adam(config.critic_learning_rate)
         self.trace_count = 0
@@ -342,7 +348,7 @@ class DDPG:
         batch = batch.replace(
             obs=self.normalize(learner, batch.obs), next_obs=self.normalize(learner, batch.next_obs)
         )
-        critic_grad, critic_metrics = jax.grad(losses.critic_loss, has_aux=True)(
+        critic_grad, (critic_metrics, critic_vars) = jax.grad(losses.critic_loss, has_aux=True)(
             learner.critic_params,
             learner.target_actor_params,
             learner.target_critic_params,
@@ -351,29 +357,49 @@ class DDPG:
             critic_apply=self.critic.apply,
             gamma=self.gamma,
             target_clip=self.config.target_clip,
+            critic_train_apply=self._train_apply(self.critic),
         )
-        actor_grad, actor_metrics = jax.grad(losses.actor_loss, has_aux=True)(
+        actor_grad, (actor_metrics, actor_vars) = jax.grad(losses.actor_loss, has_aux=True)(
             learner.actor_params,
             learner.critic_params,
             batch.obs,
             actor_apply=self.actor.apply,
             critic_apply=self.critic.apply,
             action_l2=self.config.action_l2,
+            actor_train_apply=self._train_apply(self.actor),
         )
         critic_grad, actor_grad = jax.lax.pmean((critic_grad, actor_grad), AXIS)
         critic_updates, critic_opt_state = self.critic_opt.update(
             critic_grad, learner.critic_opt_state
         )
         actor_updates, actor_opt_state = self.actor_opt.update(actor_grad, learner.actor_opt_state)
+        critic_params = optax.apply_updates(learner.critic_params, critic_updates)
+        actor_params = optax.apply_updates(learner.actor_params, actor_updates)
+        if self.config.batch_norm:
+            # Running averages of the minibatch statistics, the same on every device.
+            stats = jax.lax.pmean((critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS)
+            critic_params = critic_params | {"batch_stats": stats[0]}
+            actor_params = actor_params | {"batch_stats": stats[1]}
         learner = learner.replace(
-            critic_params=optax.apply_updates(learner.critic_params, critic_updates),
-            actor_params=optax.apply_updates(learner.actor_params, actor_updates),
+            critic_params=critic_params,
+            actor_params=actor_params,
             critic_opt_state=critic_opt_state,
             actor_opt_state=actor_opt_state,
             updates=learner.updates + 1,
         )
         metrics = jax.lax.pmean(critic_metrics | actor_metrics, AXIS)
         return learner, {f"sgd/{k}": v for k, v in metrics.items()}
+
+    def _train_apply(self, module):
+        """Forward pass in training mode: (variables, *inputs) -> (output, new variables)."""
+        if not self.config.batch_norm:
+            return None
+
+        def apply(variables, *inputs):
+            out, updates = module.apply(variables, *inputs, train=True, mutable=["batch_stats"])
+            return out, variables | updates
+
+        return apply
 
     # ------------------------------------------------------------ evaluation
     def evaluate(self, state: TrainerState, rng: jax.Array) -> dict[str, float]:
