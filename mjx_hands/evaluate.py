@@ -16,9 +16,11 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import Annotated
 
 import jax
 import numpy as np
+import tyro
 
 from mjx_hands import checkpoint, training
 
@@ -27,7 +29,7 @@ from mjx_hands import checkpoint, training
 class EvalArgs:
     """Evaluate the policy of a training run and render a video."""
 
-    run_dir: str
+    run_dir: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
     """Folder written by train.py."""
     episodes: int = 128
     """Evaluation episodes (one batch)."""
@@ -41,8 +43,10 @@ class EvalArgs:
     """Video path; default RUN_DIR/eval.mp4."""
     camera: str = "side"
     """Scene camera: 'side' or 'top'."""
-    width: int = 480
-    height: int = 360
+    width: int = 512
+    """Video width in pixels (a multiple of 16 keeps codecs from resizing)."""
+    height: int = 384
+    """Video height in pixels."""
 
 
 def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
@@ -113,8 +117,6 @@ def render_video(single, trajectory, path: Path, camera: str, width: int, height
 
 
 def main(argv: list[str] | None = None) -> int:
-    import tyro
-
     os.environ.setdefault("MUJOCO_GL", "egl")
     args = tyro.cli(EvalArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
     run_dir = Path(args.run_dir)

@@ -217,24 +217,34 @@ class MetricsLog:
 
 
 def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
-    """Evaluation success rate (and final-step success) against env steps, as a PNG."""
+    """Evaluation success rates and the training return against env steps, as a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    fig, (ax, ax_return) = plt.subplots(1, 2, figsize=(10, 4))
     evals = [r for r in rows if "eval/success" in r]
-    fig, ax = plt.subplots(figsize=(6, 4))
     if evals:
         steps = [r["train/env_steps"] for r in evals]
         ax.plot(steps, [r["eval/success"] for r in evals], "o-", label="contact reached")
-        ax.plot(steps, [r["eval/success_final"] for r in evals], "s--", label="contact at the end")
+        if all("eval/success_final" in r for r in evals):
+            finals = [r["eval/success_final"] for r in evals]
+            ax.plot(steps, finals, "s--", label="contact at the end")
+        ax.legend(loc="lower right")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation success rate")
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right")
-    ax.set_title(title)
+    train = [r for r in rows if "train/episode_return" in r and r.get("train/episodes", 1) > 0]
+    if train:
+        ax_return.plot(
+            [r["train/env_steps"] for r in train], [r["train/episode_return"] for r in train]
+        )
+    ax_return.set_xlabel("environment steps")
+    ax_return.set_ylabel("training episode return (exploring)")
+    ax_return.grid(alpha=0.3)
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -243,7 +253,7 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
 # ----------------------------------------------------------------- run
 def _checkpoint_tree(state: TrainerState, algo: DDPG, save_replay: bool) -> dict[str, Any]:
     tree = {
-        "learner": jax.tree.map(lambda x: x[0], state.learner),
+        "learner": jax.tree.map(_first_device, state.learner),
         "env_state": state.env_state,
         "stats": state.stats,
         "rng": state.rng,
@@ -252,6 +262,13 @@ def _checkpoint_tree(state: TrainerState, algo: DDPG, save_replay: bool) -> dict
     if save_replay:
         tree["buffer"] = state.buffer
     return tree
+
+
+def _first_device(x):
+    """Device 0's slice of a replicated leaf; also for abstract (eval_shape) leaves."""
+    if isinstance(x, jax.ShapeDtypeStruct):
+        return jax.ShapeDtypeStruct(x.shape[1:], x.dtype)
+    return x[0]
 
 
 def _from_checkpoint_tree(tree: dict[str, Any], fresh: TrainerState, algo: DDPG) -> TrainerState:

@@ -277,7 +277,7 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
             "--width",
             "160",
             "--height",
-            "120",
+            "128",
         ],
         cwd=ROOT,
         capture_output=True,
