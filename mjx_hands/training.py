@@ -92,7 +92,7 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
         base = TrainConfig(
             preset="cpu",
             num_envs=64,
-            epochs=60,
+            epochs=25,  # ~50 min on 2 cores (about 55 env steps/s with SGD)
             eval_envs=64,
             ddpg=DDPGConfig(
                 replay_capacity=200_000,
