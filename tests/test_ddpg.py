@@ -170,6 +170,10 @@ def test_ddpg_solves_point_reaching(trained_point_reach):
     assert evaluation["eval/success"] > 0.9
     assert history[-1]["train/updates"] == 12 * 20 * 10 - 3 * 10  # 3 warm-up iterations
     assert all(np.isfinite(m["sgd/critic_loss"]) for m in history)
+    # The env's own metrics are logged per step: reward = -distance here.
+    np.testing.assert_allclose(
+        history[-1]["env/distance"], -history[-1]["train/reward_per_step"], rtol=1e-5
+    )
 
 
 def test_epochs_compile_once(trained_point_reach):

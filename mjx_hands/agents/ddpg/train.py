@@ -290,6 +290,10 @@ class DDPG:
                 (state.learner.actor_params, state.learner.critic_params)
             ).astype(jnp.float32),
         }
+        # Environment metrics (reward terms, ...) averaged over the epoch's steps.
+        metrics |= {
+            f"env/{k}": jax.lax.pmean(v.mean(), AXIS) for k, v in finished["env_metrics"].items()
+        }
         # SGD metrics of the epoch's last iteration (the most recent networks).
         metrics |= {k: v[-1].mean() for k, v in sgd_metrics.items()}
         return state, metrics
@@ -313,6 +317,7 @@ class DDPG:
             "return": episode_return * done,
             "success": episode_success * done,
             "reward": next_state.reward,
+            "env_metrics": next_state.metrics,  # e.g. each reward term, per step
         }
         stats = EpisodeStats(episode_return * (1 - done), episode_success * (1 - done))
         return (next_state, stats), (transition, finished)
