@@ -33,10 +33,14 @@ def _defaults(argv: list[str]):
 
     from mjx_hands import training
 
-    run_dir = _option(argv, "--run-dir")
+    run_dir = _option(argv, "--run-dir") or _option(argv, "--run_dir")
     if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
         saved = json.loads((Path(run_dir) / "config.json").read_text())
-        return dataclasses.replace(training.config_from_json(saved), resume=False)
+        try:
+            config = training.config_from_json(saved)
+        except TypeError as err:  # a key this version does not know
+            raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
+        return dataclasses.replace(config, resume=False)
     return training.preset(_option(argv, "--preset") or "auto")
 
 

@@ -1,7 +1,10 @@
 """Brax's own SAC and PPO trainers on the same task, for comparison with DDPG.
 
-The hand environment speaks Brax's ``Env`` API, so Brax's trainers run it unchanged
-(Brax wraps it with its own vmap, episode and auto-reset wrappers). The environment
+The hand environment speaks Brax's ``Env`` API, so Brax's trainers run it. Their
+default wrappers would restart a finished episode from its cached *first* state
+without new randomisation (and keep counting the env's own episode step), so the
+trainers get :func:`wrap_for_brax` instead: the project's batched auto-reset, which
+draws a fresh demonstration, target and start for every episode. The environment
 budget equals DDPG's for the same config: ``epochs × num_envs × unroll_length ×
 iterations_per_epoch`` steps; ``eval_every`` sets how many evaluations Brax runs.
 Networks are 3×256 like DDPG's. After training the deterministic policy is evaluated
@@ -19,7 +22,54 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
+
+
+def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomization_fn=None):
+    """Brax's ``wrap_env_fn``: vmap + the project's auto-reset (batched keys at reset).
+
+    The env itself ends episodes at ``episode_length`` with ``truncation`` set, so no
+    episode wrapper is added; ``action_repeat`` and ``randomization_fn`` are not
+    supported (the env has its own control period and randomisation).
+    """
+    from mjx_hands.env import BatchedEnv
+
+    if action_repeat != 1 or randomization_fn is not None:
+        raise ValueError("the hand environments take no action_repeat or randomization_fn")
+    if getattr(env, "episode_length", episode_length) != episode_length:
+        raise ValueError(f"episode_length {episode_length} differs from the env's own")
+
+    class BraxTrainingEnv(BatchedEnv):
+        """Batched keys at ``reset`` and the episode bookkeeping Brax's trainers read
+        (``steps``, ``episode_done``, ``episode_metrics``), with the env's own
+        ``truncation`` (Brax's EpisodeWrapper would call the env's time limit a
+        termination, since the env itself reports ``done`` there)."""
+
+        def reset(self, rng: jax.Array):
+            state = jax.vmap(self.env.reset)(rng)
+            zeros = jnp.zeros_like(state.reward)
+            state.info["terminal_obs"] = state.obs
+            state.info["steps"] = zeros
+            state.info["episode_done"] = zeros
+            totals = {"sum_reward": zeros, "length": zeros}
+            state.info["episode_metrics"] = totals | {k: zeros for k in state.metrics}
+            return state
+
+        def step(self, state, action: jax.Array):
+            fresh = 1.0 - state.info["episode_done"]  # 0 where the last step ended an episode
+            steps = state.info["steps"] * fresh + 1.0
+            totals = {k: v * fresh for k, v in state.info["episode_metrics"].items()}
+            state = super().step(state, action)
+            totals["sum_reward"] = totals["sum_reward"] + state.reward
+            totals["length"] = totals["length"] + 1.0
+            for key in totals:
+                if key in state.metrics and key not in ("sum_reward", "length", "reward"):
+                    totals[key] = totals[key] + state.metrics[key]
+            state.info.update(steps=steps, episode_done=state.done, episode_metrics=totals)
+            return state
+
+    return BraxTrainingEnv(env, num_envs=None)
 
 
 def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, Any]:
@@ -67,6 +117,7 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
         num_evals=num_evals,
         normalize_observations=True,
         progress_fn=progress,
+        wrap_env_fn=wrap_for_brax,
     )
     hidden = tuple(ddpg.hidden_sizes)
     if config.algo == "ppo":

@@ -29,8 +29,8 @@ def _leaves(tree) -> tuple[list[str], list[np.ndarray], Any]:
     return paths, [np.asarray(x) for _, x in with_path], treedef
 
 
-def _manager(directory: Path, max_to_keep: int = 3) -> ocp.CheckpointManager:
-    options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=True)
+def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp.CheckpointManager:
+    options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=create)
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
@@ -43,7 +43,7 @@ def save(directory: Path, step: int, state, metadata: dict[str, Any]) -> None:
     ]
     # Orbax refuses empty arrays (MJX data has some); their shape in the record suffices.
     arrays = {f"leaf_{i:05d}": x for i, x in enumerate(leaves) if x.size}
-    with _manager(directory) as manager:
+    with _manager(directory, create=True) as manager:
         manager.save(
             step,
             args=ocp.args.Composite(
@@ -123,6 +123,8 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
 
 
 def _resolve_step(directory: Path, step: int | None) -> int:
+    if not Path(directory).is_dir():
+        raise CheckpointError(f"no checkpoint found in {directory} (no such folder)")
     if step is None:
         step = latest_step(directory)
         if step is None:

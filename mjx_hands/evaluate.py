@@ -16,7 +16,7 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import jax
 import numpy as np
@@ -41,8 +41,8 @@ class EvalArgs:
     """Episodes rendered into the video (0: no video)."""
     video: str | None = None
     """Video path; default RUN_DIR/eval.mp4."""
-    camera: str = "side"
-    """Scene camera: 'side' or 'top'."""
+    camera: Literal["side", "top"] = "side"
+    """Scene camera."""
     width: int = 512
     """Video width in pixels (a multiple of 16 keeps codecs from resizing)."""
     height: int = 384
@@ -116,13 +116,23 @@ def render_video(single, trajectory, path: Path, camera: str, width: int, height
         renderer.close()
 
 
+def _check_video_size(model, args: EvalArgs) -> None:
+    limit = (model.vis.global_.offwidth, model.vis.global_.offheight)
+    if args.video_episodes > 0 and (args.width > limit[0] or args.height > limit[1]):
+        raise ValueError(
+            f"video {args.width}x{args.height} exceeds the scene's offscreen buffer "
+            f"{limit[0]}x{limit[1]}; choose --width/--height within it"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     args = tyro.cli(EvalArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
     run_dir = Path(args.run_dir)
     try:
         algo, learner, config, single = load_policy(run_dir, args.step, args.episodes)
-    except (checkpoint.CheckpointError, ValueError, FileNotFoundError) as err:
+        _check_video_size(single.mj_model, args)
+    except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     replicated = jax.tree.map(lambda x: np.broadcast_to(x, (algo.num_devices,) + x.shape), learner)
@@ -138,15 +148,23 @@ def main(argv: list[str] | None = None) -> int:
         policy = lambda obs: algo.policy(learner, obs)
         trajectory = rollout(single, policy, args.video_episodes, jax.random.PRNGKey(args.seed + 1))
         video = Path(args.video or run_dir / "eval.mp4")
-        render_video(
-            single,
-            trajectory,
-            video,
-            args.camera,
-            args.width,
-            args.height,
-            fps=1.0 / single.config.control_dt,
-        )
+        try:
+            render_video(
+                single,
+                trajectory,
+                video,
+                args.camera,
+                args.width,
+                args.height,
+                fps=1.0 / single.config.control_dt,
+            )
+        except Exception as err:  # no GL context, codec missing, ...: say so, keep eval.json
+            print(
+                f"error: rendering failed ({type(err).__name__}: {err}); the evaluation is in "
+                f"{run_dir / 'eval.json'}. Headless machines need MUJOCO_GL=egl or osmesa.",
+                file=sys.stderr,
+            )
+            return 1
         print(f"video: {video} ({args.video_episodes} episodes, camera {args.camera!r})")
     return 0
 

@@ -12,6 +12,7 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -164,8 +165,8 @@ def make_learner(config: TrainConfig, devices=None, env_factory=None) -> tuple[D
     ``env_factory(config, num_devices) -> (train_env, eval_env, single_env)`` replaces
     the hand environment (tests train the point-reach task through the same loop).
     """
-    devices = devices or jax.local_devices()
-    train_env, eval_env, single = (env_factory or make_envs)(config, len(devices))
+    num_devices = len(devices or jax.local_devices())  # this host's share of the batch
+    train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
     algo = DDPG(
         train_env,
         config.ddpg,
@@ -186,7 +187,8 @@ class MetricsLog:
         if self.path.exists():
             with self.path.open() as f:
                 self.rows = [
-                    {k: float(v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)
+                    {k: float(v) for k, v in r.items() if v not in ("", None) and k is not None}
+                    for r in csv.DictReader(f)
                 ]
         try:
             from tensorboardX import SummaryWriter
@@ -200,10 +202,14 @@ class MetricsLog:
         keys: list[str] = []
         for r in self.rows:
             keys += [k for k in r if k not in keys]
-        with self.path.open("w", newline="") as f:  # rewritten: columns may grow (eval)
+        # Rewritten whole (columns may grow) into a temporary file, then renamed, so
+        # an interruption never leaves a truncated history.
+        tmp = self.path.with_suffix(".csv.tmp")
+        with tmp.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=keys)
             writer.writeheader()
             writer.writerows(self.rows)
+        os.replace(tmp, self.path)
         if self.tb is not None:
             step = int(row["train/env_steps"])
             for k, v in row.items():
@@ -305,6 +311,7 @@ RESUME_FIXED = (
     "reward",
     "imitation",
     "mocap_source",
+    "mocap",
     "num_envs",
     "algo",
     "ddpg.hidden_sizes",
@@ -362,7 +369,6 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         return brax_agents.run(config, run_dir, out=out, env_factory=env_factory)
 
     run_dir.mkdir(parents=True, exist_ok=True)
-    config_path.write_text(json.dumps(config_to_json(config), indent=2))
     algo, single = make_learner(config, env_factory=env_factory)
     demos = getattr(single, "demos", None)
     source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
@@ -377,10 +383,14 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     state = algo.init(key)
     start_epoch = 0
     if config.resume and checkpoint.latest_step(ckpt_dir) is not None:
-        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, algo, config.save_replay))
+        # The checkpoint's own setting says whether it holds the replay buffer.
+        saved_replay = checkpoint.read_metadata(ckpt_dir)["config"]["save_replay"]
+        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, algo, saved_replay))
         state = _from_checkpoint_tree(tree, state, algo)
         start_epoch = int(meta["epoch"])
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
+    # Written once the run is known to start (a refused resume leaves the old one).
+    config_path.write_text(json.dumps(config_to_json(config), indent=2))
 
     log = MetricsLog(run_dir)
     log.rows = [r for r in log.rows if r.get("epoch", 0) <= start_epoch]

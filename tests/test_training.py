@@ -350,3 +350,64 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     assert resumed == config  # the command line's --epochs is applied by tyro on top
     fresh = train_cli._defaults(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
     assert fresh == training.preset("cpu")
+
+
+def test_brax_wrapper_restarts_episodes_with_fresh_randomisation():
+    """Brax's trainers get the project's auto-reset: fixed-length episodes, new goals."""
+    from mjx_hands.brax_agents import wrap_for_brax
+
+    env = wrap_for_brax(PointReach(episode_length=5), episode_length=5)
+    state = env.reset(jax.random.split(jax.random.PRNGKey(0), 4))
+    goals = [np.asarray(state.info["episode"].goal)]
+    done_steps = []
+    step = jax.jit(env.step)
+    for t in range(1, 16):
+        state = step(state, jnp.zeros((4, 2)))
+        if np.all(np.asarray(state.done) == 1):
+            done_steps.append(t)
+            assert np.all(np.asarray(state.info["truncation"]) == 1)
+            goals.append(np.asarray(state.info["episode"].goal))
+        else:
+            assert not np.any(np.asarray(state.done))
+    assert done_steps == [5, 10, 15]
+    np.testing.assert_array_equal(state.info["steps"], 5.0)
+    np.testing.assert_array_equal(state.info["episode_metrics"]["length"], 5.0)
+    assert all(not np.allclose(a, b) for a, b in zip(goals, goals[1:], strict=False))
+    with pytest.raises(ValueError, match="action_repeat"):
+        wrap_for_brax(PointReach(), episode_length=20, action_repeat=2)
+
+
+def test_invalid_ddpg_sizes_are_refused():
+    with pytest.raises(ValueError, match="min_replay_size"):
+        DDPGConfig(replay_capacity=1_000, min_replay_size=5_000)
+    with pytest.raises(ValueError, match="updates_per_iteration"):
+        DDPGConfig(updates_per_iteration=0)
+
+
+def test_resume_uses_the_checkpoints_own_replay_setting(tmp_path):
+    run_dir = tmp_path / "run"
+    training.run(
+        _config(run_dir, epochs=1, eval_every=1, save_replay=False),
+        out=io.StringIO(),
+        env_factory=point_factory,
+    )
+    log = io.StringIO()
+    summary = training.run(
+        _config(run_dir, epochs=2, eval_every=1, save_replay=True, resume=True),
+        out=log,
+        env_factory=point_factory,
+    )
+    assert "resumed from epoch 1" in log.getvalue() and summary["epochs"] == 2
+    assert "buffer" in [
+        e["path"].split("'")[1] for e in checkpoint.read_metadata(run_dir / "checkpoints")["leaves"]
+    ]
+
+
+def test_metrics_log_survives_a_short_row(tmp_path):
+    (tmp_path / "metrics.csv").write_text("epoch,train/env_steps,a\n1,10,0.5\n2,20\n")
+    log = training.MetricsLog(tmp_path)
+    assert log.rows == [
+        {"epoch": 1.0, "train/env_steps": 10.0, "a": 0.5},
+        {"epoch": 2.0, "train/env_steps": 20.0},
+    ]
+    log.close()

@@ -26,13 +26,16 @@ class MLP(nn.Module):
     out_size: int
     layer_norm: bool = False
     batch_norm: bool = False
+    batch_axis_name: str | None = None
+    """Mapped axis whose devices share minibatch statistics when training (pmap)."""
 
     @nn.compact
     def __call__(self, x: jax.Array, train: bool = False) -> jax.Array:
         for size in self.hidden_sizes:
             x = nn.Dense(size)(x)
             if self.batch_norm:
-                x = nn.BatchNorm(use_running_average=not train, momentum=0.99)(x)
+                axis = self.batch_axis_name if train else None
+                x = nn.BatchNorm(use_running_average=not train, momentum=0.99, axis_name=axis)(x)
             if self.layer_norm:
                 x = nn.LayerNorm()(x)
             x = nn.relu(x)
@@ -47,10 +50,17 @@ class Actor(nn.Module):
     hidden_sizes: Sequence[int] = (256, 256, 256)
     layer_norm: bool = False
     batch_norm: bool = False
+    batch_axis_name: str | None = None
 
     @nn.compact
     def __call__(self, obs: jax.Array, train: bool = False) -> jax.Array:
-        mlp = MLP(self.hidden_sizes, self.action_size, self.layer_norm, self.batch_norm)
+        mlp = MLP(
+            self.hidden_sizes,
+            self.action_size,
+            self.layer_norm,
+            self.batch_norm,
+            self.batch_axis_name,
+        )
         return jnp.tanh(mlp(obs, train))
 
 
@@ -60,11 +70,13 @@ class Critic(nn.Module):
     hidden_sizes: Sequence[int] = (256, 256, 256)
     layer_norm: bool = False
     batch_norm: bool = False
+    batch_axis_name: str | None = None
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array, train: bool = False) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
-        return MLP(self.hidden_sizes, 1, self.layer_norm, self.batch_norm)(x, train)[..., 0]
+        mlp = MLP(self.hidden_sizes, 1, self.layer_norm, self.batch_norm, self.batch_axis_name)
+        return mlp(x, train)[..., 0]
 
 
 @struct.dataclass

@@ -10,9 +10,11 @@ gradients and observation statistics are all-reduced (``axis_name='devices'``).
 Nothing crosses between host and device inside an epoch, and the trainer state is
 donated, so the buffer is updated in place.
 
-Multi-host: call ``jax.distributed.initialize()`` before building the trainer; each
-host then runs this same program over its local devices and the collectives span
-all hosts (``jax.pmap`` over ``jax.local_devices()``).
+Multi-host: call ``jax.distributed.initialize()`` before building the trainer and
+run the same program on every host. The pmap then spans all hosts' devices (each
+host feeds its local ones, with keys folded by ``jax.process_index()``) and the
+collectives all-reduce across hosts; sizes in the config are per host. This path
+follows JAX's multi-process pmap rules but has not been run on several hosts here.
 """
 
 from __future__ import annotations
@@ -83,7 +85,8 @@ class DDPGConfig:
             "batch_size": self.batch_size > 0,
             "replay_capacity": self.replay_capacity >= self.batch_size,
             "unroll_length": self.unroll_length > 0,
-            "updates_per_iteration": self.updates_per_iteration >= 0,
+            "updates_per_iteration": self.updates_per_iteration > 0,
+            "min_replay_size": 0 <= self.min_replay_size <= self.replay_capacity,
             "iterations_per_epoch": self.iterations_per_epoch > 0,
             "polyak": 0.0 <= self.polyak <= 1.0,
             "random_action_prob": 0.0 <= self.random_action_prob <= 1.0,
@@ -155,6 +158,8 @@ class DDPG:
         self.eval_env = eval_env or env
         self.config = config
         self.episode_length = episode_length
+        # devices=None: every device of every host (multi-host); else exactly these.
+        self._pmap_devices = devices
         self.devices = devices or jax.local_devices()
         self.num_devices = len(self.devices)
         for name in ("batch_size", "replay_capacity", "min_replay_size"):
@@ -165,14 +170,16 @@ class DDPG:
                 )
         self.gamma = config.discount if config.discount is not None else 1.0 - 1.0 / episode_length
         self.actor = networks.Actor(
-            env.action_size, config.hidden_sizes, config.layer_norm, config.batch_norm
+            env.action_size, config.hidden_sizes, config.layer_norm, config.batch_norm, AXIS
         )
-        self.critic = networks.Critic(config.hidden_sizes, config.layer_norm, config.batch_norm)
+        self.critic = networks.Critic(
+            config.hidden_sizes, config.layer_norm, config.batch_norm, AXIS
+        )
         self.actor_opt = optax.adam(config.actor_learning_rate)
         self.critic_opt = optax.adam(config.critic_learning_rate)
         self.trace_count = 0
         """How often the epoch function was traced (1 after any number of epochs)."""
-        pmap = functools.partial(jax.pmap, axis_name=AXIS, devices=self.devices)
+        pmap = functools.partial(jax.pmap, axis_name=AXIS, devices=self._pmap_devices)
         self._init = pmap(self._init_device)
         self._epoch = pmap(self._epoch_device, donate_argnums=0)
         self._evaluate = pmap(self._evaluate_device)
@@ -200,6 +207,7 @@ class DDPG:
     # ------------------------------------------------------------------ init
     def init(self, rng: jax.Array) -> TrainerState:
         """A fresh trainer state from one key; leaves get a leading device axis."""
+        rng = jax.random.fold_in(rng, jax.process_index())  # distinct envs on every host
         return self._init(jax.random.split(rng, self.num_devices))
 
     def _init_device(self, rng: jax.Array) -> TrainerState:
@@ -417,6 +425,7 @@ class DDPG:
 
     def evaluate_learner(self, learner: LearnerState, rng: jax.Array) -> dict[str, float]:
         """:meth:`evaluate` of a replicated learner (leaves with a leading device axis)."""
+        rng = jax.random.fold_in(rng, jax.process_index())
         metrics = self._evaluate(learner, jax.random.split(rng, self.num_devices))
         return {k: float(v[0]) for k, v in jax.device_get(metrics).items()}
 
