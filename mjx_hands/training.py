@@ -134,11 +134,6 @@ def make_envs(config: TrainConfig, num_devices: int):
                 f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
                 f"the {num_devices} devices"
             )
-    variant = (
-        config.reward
-        if config.imitation
-        else ("no_imitation" if config.reward == "full" else config.reward)
-    )
     from mjx_hands import reward_params
 
     weights = reward_params.variant(config.reward)
@@ -147,7 +142,7 @@ def make_envs(config: TrainConfig, num_devices: int):
     single = env_lib.HandInteractionEnv(
         env_lib.EnvConfig(
             task=config.task,
-            reward=variant,
+            reward=config.reward,  # a label here: the weights below decide
             weights=weights,
             mocap_source=config.mocap_source,
             mocap_path=config.mocap,

@@ -21,12 +21,10 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import optax
 from flax import struct
 
@@ -446,15 +444,6 @@ class DDPG:
             },
             AXIS,
         )
-
-    # ------------------------------------------------------------ utilities
-    def unreplicate(self, tree):
-        """The first device's copy of a replicated tree (host numpy)."""
-        return jax.tree.map(lambda x: np.asarray(x[0]), jax.device_get(tree))
-
-    def acting_function(self, learner: LearnerState) -> Callable[[jax.Array], jax.Array]:
-        """A jitted deterministic policy obs (..., obs) -> action (..., act) of an unreplicated learner."""
-        return jax.jit(functools.partial(self.policy, learner))
 
 
 def _all_finite(tree) -> jax.Array:
