@@ -2,9 +2,11 @@
 
 Both run the same hand-pair model from the same randomised start states under the
 same random set-point sequence, so the report gives a ratio, not only absolute
-numbers. Compile time is measured apart from run time.
+numbers. Compile time is measured apart from run time. The JSON is rewritten after
+every batch size, so a run cut short keeps what it measured.
 
     python -m benchmarks.throughput --batch-sizes 32,128 --out benchmarks/results_cpu.json
+    python -m benchmarks.throughput --batch-sizes 256,4096,16384 --env-step-batches 4096
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx, rollout
+from mujoco import rollout
 
 from mjx_hands import env as env_lib
 
@@ -34,8 +36,16 @@ def _time_loop(step, carry, actions):
     return carry, time.perf_counter() - t0
 
 
-def measure_mjx(env: env_lib.HandInteractionEnv, batch: int, control_steps: int) -> dict:
-    """MJX physics-only and full env.step throughput at one batch size."""
+def device_peak_bytes() -> int | None:
+    """Peak bytes allocated on the first device so far (None where the backend keeps no count)."""
+    stats = jax.devices()[0].memory_stats() or {}
+    return stats.get("peak_bytes_in_use")
+
+
+def measure_mjx(
+    env: env_lib.HandInteractionEnv, batch: int, control_steps: int, env_step: bool = True
+) -> dict:
+    """MJX physics-only and (if ``env_step``) full env.step throughput at one batch size."""
     benv = env_lib.BatchedEnv(env, batch)
     t0 = time.perf_counter()
     reset_c = jax.jit(benv.reset).lower(jax.random.PRNGKey(0)).compile()
@@ -44,32 +54,28 @@ def measure_mjx(env: env_lib.HandInteractionEnv, batch: int, control_steps: int)
     rng = np.random.default_rng(0)
     actions = jnp.asarray(rng.uniform(-1, 1, (control_steps, batch, env.action_size)), jnp.float32)
 
-    def physics(data, action):
-        ctrl = env.ctrl_lo + 0.5 * (action + 1.0) * (env.ctrl_hi - env.ctrl_lo)
-        data = data.replace(ctrl=ctrl)
-        return jax.lax.fori_loop(0, env.n_substeps, lambda _, d: mjx.step(env.mjx_model, d), data)
-
-    physics_batch = jax.jit(jax.vmap(physics))
+    physics_batch = jax.jit(jax.vmap(env.physics))
     t0 = time.perf_counter()
     physics_c = physics_batch.lower(state.pipeline_state, actions[0]).compile()
     t_physics_compile = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
-    t_step_compile = time.perf_counter() - t0
-
-    _, t_physics = _time_loop(physics_c, state.pipeline_state, actions)
-    s, t_env = _time_loop(step_c, state, actions)
+    data, t_physics = _time_loop(physics_c, state.pipeline_state, actions)
     n = batch * control_steps
-    return {
+    result = {
         "batch": batch,
         "physics_steps_per_s": n * env.n_substeps / t_physics,
-        "env_control_steps_per_s": n / t_env,
-        "env_physics_steps_per_s": n * env.n_substeps / t_env,
-        "compile_s": {"reset": t_reset, "physics": t_physics_compile, "env_step": t_step_compile},
-        "finite": bool(np.all(np.isfinite(np.asarray(s.obs)))),
-        "_start": state,
-        "_actions": actions,
+        "compile_s": {"reset": t_reset, "physics": t_physics_compile},
+        "finite": bool(np.all(np.isfinite(np.asarray(data.qpos)))),
     }
+    if env_step:
+        t0 = time.perf_counter()
+        step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
+        result["compile_s"]["env_step"] = time.perf_counter() - t0
+        s, t_env = _time_loop(step_c, state, actions)
+        result["env_control_steps_per_s"] = n / t_env
+        result["env_physics_steps_per_s"] = n * env.n_substeps / t_env
+        result["finite"] &= bool(np.all(np.isfinite(np.asarray(s.obs))))
+    result["device_peak_bytes"] = device_peak_bytes()
+    return result | {"_start": state, "_actions": actions}
 
 
 def measure_native(env: env_lib.HandInteractionEnv, start, actions, nthread: int) -> dict:
@@ -102,6 +108,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="handshake")
     parser.add_argument("--batch-sizes", default="32,128")
+    parser.add_argument(
+        "--env-step-batches",
+        default=None,
+        help="batch sizes at which env.step (physics + sensors + reward) is also timed "
+        "(default: all); each one costs a compile",
+    )
     parser.add_argument("--control-steps", type=int, default=10)
     parser.add_argument("--out", default=None, help="JSON file to write")
     args = parser.parse_args()
@@ -114,21 +126,28 @@ def main() -> None:
             "processor": platform.processor() or platform.machine(),
             "cpu_count": nthread,
             "jax_device": str(jax.devices()[0]),
+            "device_kind": jax.devices()[0].device_kind,
         },
         "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
         "model": env_lib.model_sizes(env),
+        "control_steps": args.control_steps,
         "results": [],
     }
-    for batch in [int(b) for b in args.batch_sizes.split(",")]:
-        res = measure_mjx(env, batch, args.control_steps)
+    batches = [int(b) for b in args.batch_sizes.split(",")]
+    env_step_batches = (
+        batches if args.env_step_batches is None else
+        [int(b) for b in args.env_step_batches.split(",") if b]
+    )
+    for batch in batches:
+        res = measure_mjx(env, batch, args.control_steps, env_step=batch in env_step_batches)
         native = measure_native(env, res.pop("_start"), res.pop("_actions"), nthread)
         res["native"] = native
         res["mjx_over_native"] = res["physics_steps_per_s"] / native["physics_steps_per_s"]
         report["results"].append(res)
         print(json.dumps(res, indent=1), flush=True)
-    if args.out:
-        with open(args.out, "w") as f:
-            json.dump(report, f, indent=1)
+        if args.out:
+            with open(args.out, "w") as f:
+                json.dump(report, f, indent=1)
 
 
 if __name__ == "__main__":

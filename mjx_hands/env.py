@@ -305,7 +305,7 @@ class HandInteractionEnv(Env):
         features = self._features(data, episode)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
-        metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero}
+        metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
         return State(
             pipeline_state=data,
             obs=self._observation(features, episode),
@@ -315,14 +315,21 @@ class HandInteractionEnv(Env):
             info={"episode": episode, "truncation": zero, "success": zero},
         )
 
+    def physics(self, data: mjx.Data, action: jax.Array) -> mjx.Data:
+        """One control period: set-points from action (24,) in [-1, 1], then n_substeps steps."""
+        ctrl = self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
+        data = data.replace(ctrl=ctrl)
+        # GPUs default float32 matmuls to TF32 (10-bit mantissa), too coarse for the
+        # constraint solver; the physics keeps full float32 (a no-op on CPU).
+        with jax.default_matmul_precision("highest"):
+            return jax.lax.fori_loop(
+                0, self.n_substeps, lambda _, d: mjx.step(self.mjx_model, d), data
+            )
+
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)
-        ctrl = self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
-        data = state.pipeline_state.replace(ctrl=ctrl)
-        data = jax.lax.fori_loop(
-            0, self.n_substeps, lambda _, d: mjx.step(self.mjx_model, d), data
-        )
+        data = self.physics(state.pipeline_state, action)
         episode = state.info["episode"]
         episode = episode.replace(step=episode.step + 1)
         features = self._features(data, episode)
@@ -349,6 +356,7 @@ class HandInteractionEnv(Env):
         metrics = dict(state.metrics)  # entries that wrappers (e.g. Brax's) added stay
         metrics |= {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
         metrics["success"] = success
+        metrics["diverged"] = 1.0 - finite.astype(jnp.float32)
         info = dict(state.info)
         info.update(
             episode=episode,

@@ -66,7 +66,7 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
     algo, single = training.make_learner(config, devices=devices)
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
     tree, _ = checkpoint.restore(
-        ckpt_dir, training._checkpoint_tree(like, algo, config.save_replay), step
+        ckpt_dir, training._checkpoint_tree(like, config.save_replay), step
     )
     return algo, tree["learner"], config, single
 

@@ -114,7 +114,7 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
                 replay_capacity=2_000_000,
                 min_replay_size=40_960,
                 unroll_length=5,
-                updates_per_iteration=20,
+                updates_per_iteration=40,
                 iterations_per_epoch=10,
             ),
         )
@@ -252,7 +252,7 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
 
 
 # ----------------------------------------------------------------- run
-def _checkpoint_tree(state: TrainerState, algo: DDPG, save_replay: bool) -> dict[str, Any]:
+def _checkpoint_tree(state: TrainerState, save_replay: bool) -> dict[str, Any]:
     tree = {
         "learner": jax.tree.map(_first_device, state.learner),
         "env_state": state.env_state,
@@ -343,6 +343,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment).
     """
+    launched = time.perf_counter()  # wall clock from here includes the compiles
     run_dir = Path(
         config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
     )
@@ -380,7 +381,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     if config.resume and checkpoint.latest_step(ckpt_dir) is not None:
         # The checkpoint's own setting says whether it holds the replay buffer.
         saved_replay = checkpoint.read_metadata(ckpt_dir)["config"]["save_replay"]
-        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, algo, saved_replay))
+        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, saved_replay))
         state = _from_checkpoint_tree(tree, state, algo)
         start_epoch = int(meta["epoch"])
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
@@ -397,7 +398,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     def save(epoch: int) -> None:
         nonlocal last_saved
         meta = {"epoch": epoch, "config": config_to_json(config), "num_devices": algo.num_devices}
-        checkpoint.save(ckpt_dir, epoch, _checkpoint_tree(state, algo, config.save_replay), meta)
+        checkpoint.save(ckpt_dir, epoch, _checkpoint_tree(state, config.save_replay), meta)
         last_saved = epoch
 
     try:
@@ -423,7 +424,11 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
                 "epoch": float(epoch),
                 "time/epoch_seconds": seconds,
                 "time/env_steps_per_second": steps_per_epoch / seconds,
+                "time/wall_seconds": time.perf_counter() - launched,
             } | metrics
+            peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
+            if peak is not None:  # accelerators count; CPU does not
+                row["memory/device_peak_gib"] = peak / 2**30
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
@@ -432,11 +437,15 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
                 row |= algo.evaluate(state, eval_key)
             log.append(row)
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
-            line = (
-                f"epoch {epoch:4d}/{config.epochs}  {row['time/env_steps_per_second']:8,.0f} steps/s  "
-                f"return {metrics['train/episode_return']:8.2f}  "
-                f"train success {metrics['train/success']:.2f}"
-            )
+            rate = row["time/env_steps_per_second"]
+            line = f"epoch {epoch:4d}/{config.epochs}  {rate:8,.0f} steps/s  "
+            if metrics["train/episodes"] > 0:
+                line += (
+                    f"return {metrics['train/episode_return']:8.2f}  "
+                    f"train success {metrics['train/success']:.2f}"
+                )
+            else:
+                line += "(no episode ended this epoch)"
             if "eval/success" in row:
                 line += f"  eval success {row['eval/success']:.2f} (end {row['eval/success_final']:.2f})"
             line += f"  left ~{remaining / 60:.0f} min"

@@ -60,7 +60,7 @@ def _learner(run_dir: Path) -> dict:
     algo, _ = training.make_learner(config, env_factory=point_factory)
     state = algo.init(jax.random.PRNGKey(0))
     tree, _ = checkpoint.restore(
-        run_dir / "checkpoints", training._checkpoint_tree(state, algo, config.save_replay)
+        run_dir / "checkpoints", training._checkpoint_tree(state, config.save_replay)
     )
     return tree
 
@@ -132,7 +132,7 @@ def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     )
     config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
     algo, _ = training.make_learner(config, env_factory=point_factory)
-    like = training._checkpoint_tree(algo.init(jax.random.PRNGKey(0)), algo, True)
+    like = training._checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
     with pytest.raises(
         checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"
     ):

@@ -283,7 +283,10 @@ class DDPG:
             iteration, state, None, length=cfg.iterations_per_epoch
         )
         episodes = jax.lax.psum(finished["done"].sum(), AXIS)
-        per_episode = lambda x: jax.lax.psum(x.sum(), AXIS) / jnp.maximum(episodes, 1)
+        # NaN, not 0, when no episode ended this epoch (epochs shorter than an episode).
+        per_episode = lambda x: jnp.where(
+            episodes > 0, jax.lax.psum(x.sum(), AXIS) / jnp.maximum(episodes, 1), jnp.nan
+        )
         metrics = {
             "train/episodes": episodes,
             "train/episode_return": per_episode(finished["return"]),

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# One GPU session in a fixed wall-clock budget: the MJX-vs-native throughput sweep,
+# then a handshake DDPG run with the GPU preset. Everything worth keeping lands in
+# $OUT (default ./gpu_out): throughput JSON, logs, the run's metrics, config and plot.
+#
+#   BUDGET_S=560 bash benchmarks/gpu_session.sh
+#
+# On a machine that has JAX (with CUDA) but not mujoco/mujoco-mjx/brax, put their
+# wheels in .whl/ first (see benchmarks/RESULTS.md, "Running on a GPU").
+set -u
+OUT=${OUT:-gpu_out}
+BUDGET_S=${BUDGET_S:-560}
+THROUGHPUT_S=${THROUGHPUT_S:-200}
+mkdir -p "$OUT"
+WHEELS=${WHEELS:-.whl}
+if compgen -G "$WHEELS/*.whl" >/dev/null; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target /tmp/site "$WHEELS"/*.whl || exit 1
+  # Package data carried without its package (e.g. only the Shadow hand assets).
+  if [ -d "$WHEELS/site" ]; then cp -r "$WHEELS"/site/* /tmp/site/; fi
+  export PYTHONPATH=/tmp/site
+fi
+# No rendering here; EGL may be absent, and mujoco only tolerates an ImportError from it.
+export PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+export XLA_FLAGS="${XLA_FLAGS:-} --xla_gpu_triton_gemm_any=true"
+
+{
+  date -u
+  nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>/dev/null
+  python3 -c 'import sys, jax, mujoco, flax, optax, orbax.checkpoint as o
+print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__,
+      "flax", flax.__version__, "optax", optax.__version__, "orbax", o.__version__)
+print(jax.devices())'
+} 2>&1 | tee "$OUT/session.log"
+
+echo "== throughput sweep (at most ${THROUGHPUT_S} s)" | tee -a "$OUT/session.log"
+timeout "$THROUGHPUT_S" python3 -m benchmarks.throughput \
+  --batch-sizes "${BATCHES:-256,4096,16384}" --env-step-batches "${ENV_STEP_BATCHES:-4096}" \
+  --control-steps "${CONTROL_STEPS:-20}" --out "$OUT/results_gpu.json" 2>&1 | tee "$OUT/throughput.log"
+
+# Training gets what is left; train.py's --max-minutes counts from after its init
+# compile, so keep a minute back for that and the final evaluation.
+left=$((BUDGET_S - SECONDS))
+minutes=$(python3 -c "print(max(0.5, ($left - 90) / 60))")
+echo "== training: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+rm -rf /tmp/gpu_run
+timeout -s INT "$((left - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
+  --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} 2>&1 | tee "$OUT/train.log"
+for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
+echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"
