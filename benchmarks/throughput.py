@@ -59,6 +59,10 @@ def measure_mjx(
     physics_c = physics_batch.lower(state.pipeline_state, actions[0]).compile()
     t_physics_compile = time.perf_counter() - t0
     data, t_physics = _time_loop(physics_c, state.pipeline_state, actions)
+    # Untimed: the exact sequence native MuJoCo runs (the timed loop repeats action 0).
+    final = state.pipeline_state
+    for a in actions:
+        final = physics_c(final, a)
     n = batch * control_steps
     result = {
         "batch": batch,
@@ -75,7 +79,7 @@ def measure_mjx(
         result["env_physics_steps_per_s"] = n * env.n_substeps / t_env
         result["finite"] &= bool(np.all(np.isfinite(np.asarray(s.obs))))
     result["device_peak_bytes"] = device_peak_bytes()
-    return result | {"_start": state, "_actions": actions}
+    return result | {"_start": state, "_actions": actions, "_qpos": np.asarray(final.qpos)}
 
 
 def measure_native(env: env_lib.HandInteractionEnv, start, actions, nthread: int) -> dict:
@@ -99,12 +103,17 @@ def measure_native(env: env_lib.HandInteractionEnv, start, actions, nthread: int
     with rollout.Rollout(nthread=nthread) as r:
         r.rollout(m, datas, states, ctrl[:, :1])  # warm-up
         t0 = time.perf_counter()
-        r.rollout(m, datas, states, ctrl)
+        trajectory, _ = r.rollout(m, datas, states, ctrl)
         elapsed = time.perf_counter() - t0
-    return {"nthread": nthread, "physics_steps_per_s": ctrl.shape[0] * ctrl.shape[1] / elapsed}
+    return {
+        "nthread": nthread,
+        "physics_steps_per_s": ctrl.shape[0] * ctrl.shape[1] / elapsed,
+        # Full-physics state = [time, qpos, qvel, ...]: the last step's qpos.
+        "_qpos": np.asarray(trajectory)[:, -1, 1 : 1 + m.nq],
+    }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="handshake")
     parser.add_argument("--batch-sizes", default="32,128")
@@ -115,11 +124,19 @@ def main() -> None:
         "(default: all); each one costs a compile",
     )
     parser.add_argument("--control-steps", type=int, default=10)
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="keep the script working, not measure: batch 2, 2 control steps, 2 threads, "
+        "no env.step (two compiles, ~1.5 min on 2 CPU cores)",
+    )
     parser.add_argument("--out", default=None, help="JSON file to write")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.batch_sizes, args.env_step_batches, args.control_steps = "2", "", 2
 
     env = env_lib.make_env(args.task, mocap_source="synthetic")
-    nthread = os.cpu_count() or 1
+    nthread = min(2, os.cpu_count() or 1) if args.quick else os.cpu_count() or 1
     report = {
         "machine": {
             "platform": platform.platform(),
@@ -141,6 +158,8 @@ def main() -> None:
     for batch in batches:
         res = measure_mjx(env, batch, args.control_steps, env_step=batch in env_step_batches)
         native = measure_native(env, res.pop("_start"), res.pop("_actions"), nthread)
+        # Same starts, same set-points: the two simulators must end in nearly the same pose.
+        res["max_qpos_gap_vs_native"] = float(np.abs(res.pop("_qpos") - native.pop("_qpos")).max())
         res["native"] = native
         res["mjx_over_native"] = res["physics_steps_per_s"] / native["physics_steps_per_s"]
         report["results"].append(res)
@@ -148,6 +167,7 @@ def main() -> None:
         if args.out:
             with open(args.out, "w") as f:
                 json.dump(report, f, indent=1)
+    return report
 
 
 if __name__ == "__main__":

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import jax
 import numpy as np
+import pytest
 
 from benchmarks import replay as replay_bench
 from mjx_hands.agents.ddpg import replay
@@ -25,3 +29,35 @@ def test_ring_buffer_full_insert_keeps_the_newest_capacity_transitions():
     ids = np.asarray(buffer.data.reward)
     assert sorted(ids) == list(range(220, 320))
     assert ids[int(buffer.position) - 1] == 319
+
+
+def test_throughput_quick_mode_runs_mjx_and_native_on_the_same_sequence(tmp_path):
+    """--quick keeps benchmarks/throughput.py working in CI, and what it compares is
+    comparable: from the same starts under the same set-points, MJX (float32) and
+    native MuJoCo (float64) end 2 control steps (20 physics steps) in nearly the same pose."""
+    from benchmarks import throughput
+
+    out = tmp_path / "throughput.json"
+    report = throughput.main(["--quick", "--out", str(out)])
+    assert json.loads(out.read_text()) == report
+    (result,) = report["results"]
+    assert result["batch"] == 2 and result["finite"]
+    assert result["physics_steps_per_s"] > 0 and result["native"]["physics_steps_per_s"] > 0
+    assert result["max_qpos_gap_vs_native"] < 1e-4  # measured ~1e-7
+
+
+def test_throughput_plot_from_the_recorded_results(tmp_path):
+    from benchmarks import plot_throughput
+
+    here = Path(plot_throughput.__file__).parent
+    recorded = [here / "results_cpu.json", here / "results_gpu.json"]
+    out = tmp_path / "throughput.png"
+    plot_throughput.main([*map(str, recorded), "--out", str(out)])
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    broken = tmp_path / "broken.json"
+    broken.write_text("{not json")
+    with pytest.raises(SystemExit, match="broken.json"):
+        plot_throughput.main([str(broken), "--out", str(out)])
+    with pytest.raises(SystemExit, match="keys 'machine' and 'results'"):
+        plot_throughput.main([str(here / "results_replay_cpu.json"), "--out", str(out)])
