@@ -315,16 +315,21 @@ class HandInteractionEnv(Env):
             info={"episode": episode, "truncation": zero, "success": zero},
         )
 
-    def physics(self, data: mjx.Data, action: jax.Array) -> mjx.Data:
-        """One control period: set-points from action (24,) in [-1, 1], then n_substeps steps."""
+    def physics(
+        self, data: mjx.Data, action: jax.Array, model: mjx.Model | None = None
+    ) -> mjx.Data:
+        """One control period: set-points from action (24,) in [-1, 1], then n_substeps steps.
+
+        ``model``: another compiled model of the same scene (e.g. other solver settings,
+        as benchmarks/cost_drivers.py varies them); default the env's own.
+        """
+        model = self.mjx_model if model is None else model
         ctrl = self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
         data = data.replace(ctrl=ctrl)
         # GPUs default float32 matmuls to TF32 (10-bit mantissa), too coarse for the
         # constraint solver; the physics keeps full float32 (a no-op on CPU).
         with jax.default_matmul_precision("highest"):
-            return jax.lax.fori_loop(
-                0, self.n_substeps, lambda _, d: mjx.step(self.mjx_model, d), data
-            )
+            return jax.lax.fori_loop(0, self.n_substeps, lambda _, d: mjx.step(model, d), data)
 
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
@@ -350,9 +355,12 @@ class HandInteractionEnv(Env):
         finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
         truncated = episode.step >= self.episode_length
         done = jnp.where(finite, truncated, True).astype(jnp.float32)
-        # A diverged simulation ends its episode; its numbers must not reach the learner.
-        obs = jnp.where(finite, self._observation(features, episode), 0.0)
-        reward = jnp.where(finite, terms["total"], 0.0)
+        # A diverged simulation ends its episode as a truncation at the last finite
+        # observation, with the last finite reward: a learner bootstraps as if the episode
+        # went on, so blowing up the physics is no escape from negative rewards (as a
+        # 0-reward termination would be), and no non-finite number reaches it.
+        obs = jnp.where(finite, self._observation(features, episode), state.obs)
+        reward = jnp.where(finite, terms["total"], state.reward)
         metrics = dict(state.metrics)  # entries that wrappers (e.g. Brax's) added stay
         metrics |= {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
         metrics["success"] = success
@@ -360,7 +368,7 @@ class HandInteractionEnv(Env):
         info = dict(state.info)
         info.update(
             episode=episode,
-            truncation=jnp.where(finite, truncated, False).astype(jnp.float32),
+            truncation=jnp.where(finite, truncated, True).astype(jnp.float32),
             success=success,
         )
         return state.replace(

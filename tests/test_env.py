@@ -185,10 +185,18 @@ def test_model_sizes_are_lean(handshake_env):
 def test_a_diverged_env_ends_its_episode_without_poisoning_the_batch(handshake_env, reset_state):
     env, _, step = handshake_env
     data = reset_state.pipeline_state
-    broken = reset_state.replace(pipeline_state=data.replace(qvel=data.qvel.at[3].set(jnp.nan)))
+    broken = reset_state.replace(
+        pipeline_state=data.replace(qvel=data.qvel.at[3].set(jnp.nan)),
+        reward=reset_state.reward.at[3].set(-0.7),
+    )
     state = step(broken, jnp.zeros((env.num_envs, env.action_size)))
     done = np.asarray(state.done)
-    assert done[3] == 1 and np.asarray(state.info["truncation"])[3] == 0  # termination
+    # A truncation, not a termination: a learner bootstraps from the last finite
+    # observation with the last finite reward, so diverging is no free exit.
+    assert done[3] == 1 and np.asarray(state.info["truncation"])[3] == 1
+    np.testing.assert_array_equal(state.info["terminal_obs"][3], broken.obs[3])
+    assert float(state.reward[3]) == pytest.approx(-0.7)
+    assert float(state.metrics["diverged"][3]) == 1.0
     assert done.sum() == 1
     # The broken env restarted from a fresh, finite state; nothing non-finite leaks out.
     assert np.all(np.isfinite(np.asarray(state.obs)))
