@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import time
 
 import jax
@@ -40,6 +41,11 @@ def device_peak_bytes() -> int | None:
     """Peak bytes allocated on the first device so far (None where the backend keeps no count)."""
     stats = jax.devices()[0].memory_stats() or {}
     return stats.get("peak_bytes_in_use")
+
+
+def host_peak_rss_bytes() -> int:
+    """This process's peak resident memory so far (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 def measure_mjx(
@@ -79,6 +85,7 @@ def measure_mjx(
         result["env_physics_steps_per_s"] = n * env.n_substeps / t_env
         result["finite"] &= bool(np.all(np.isfinite(np.asarray(s.obs))))
     result["device_peak_bytes"] = device_peak_bytes()
+    result["host_peak_rss_bytes"] = host_peak_rss_bytes()
     return result | {"_start": state, "_actions": actions, "_qpos": np.asarray(final.qpos)}
 
 

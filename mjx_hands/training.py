@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 import os
+import resource
 import sys
 import time
 from pathlib import Path
@@ -429,6 +430,8 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
             peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
             if peak is not None:  # accelerators count; CPU does not
                 row["memory/device_peak_gib"] = peak / 2**30
+            # ru_maxrss is KiB on Linux.
+            row["memory/host_peak_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes

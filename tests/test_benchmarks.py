@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import jax
+import mujoco
 import numpy as np
 import pytest
 
@@ -61,3 +62,18 @@ def test_throughput_plot_from_the_recorded_results(tmp_path):
         plot_throughput.main([str(broken), "--out", str(out)])
     with pytest.raises(SystemExit, match="keys 'machine' and 'results'"):
         plot_throughput.main([str(here / "results_replay_cpu.json"), "--out", str(out)])
+
+
+def test_cost_driver_variants_change_a_copy_of_the_model_only():
+    from benchmarks import cost_drivers
+    from mjx_hands import env as env_lib
+
+    env = env_lib.make_env("handshake", mocap_source="synthetic")
+    iterations = env.mj_model.opt.iterations
+    one = cost_drivers.variant_model(env, cost_drivers.VARIANTS["1 Newton iteration"])
+    no_contacts = cost_drivers.variant_model(env, cost_drivers.VARIANTS["contacts disabled"])
+    assert one.opt.iterations == 1 != iterations == env.mj_model.opt.iterations
+    assert no_contacts.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    assert not env.mj_model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    with pytest.raises(SystemExit, match="unknown variants"):
+        cost_drivers.main(["--variants", "as built,fewer fingers"])

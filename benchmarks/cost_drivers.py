@@ -1,0 +1,159 @@
+"""Where the hand pair's MJX physics time goes, one model change at a time.
+
+Times one control period (all substeps) of vmapped MJX physics from two sets of
+states: fresh episode starts, and the environment states a training run had reached
+when it saved its last checkpoint (the policy's own distribution: hands closer,
+more contacts). For each solver variant it reports physics steps/s and, from the
+states after one control period, active contacts, active constraint rows and Newton
+iterations used (a vmapped while loop runs until its slowest environment is done).
+
+    python -m benchmarks.cost_drivers --run-dir runs/et-cpu --out benchmarks/results_cost_cpu.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjx_hands import env as env_lib
+
+
+def _iterations(n: int) -> Callable[[mujoco.MjModel], None]:
+    def change(m: mujoco.MjModel) -> None:
+        m.opt.iterations = n
+
+    return change
+
+
+def _ls_iterations(n: int) -> Callable[[mujoco.MjModel], None]:
+    def change(m: mujoco.MjModel) -> None:
+        m.opt.ls_iterations = n
+
+    return change
+
+
+def _no_contacts(m: mujoco.MjModel) -> None:
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+
+
+VARIANTS: dict[str, Callable[[mujoco.MjModel], None] | None] = {
+    "as built": None,
+    "1 Newton iteration": _iterations(1),
+    "2 line-search iterations": _ls_iterations(2),
+    "contacts disabled": _no_contacts,
+}
+
+
+def variant_model(env: env_lib.HandInteractionEnv, change) -> mjx.Model:
+    """The env's model with ``change`` applied to a copy (the env's own stays as it is)."""
+    model = copy.deepcopy(env.mj_model)
+    if change is not None:
+        change(model)
+    return mjx.put_model(model)
+
+
+def training_states(run_dir: Path) -> tuple[env_lib.HandInteractionEnv, mjx.Data]:
+    """The single env of a run and its batch of env states at the last checkpoint."""
+    from mjx_hands import checkpoint, training
+
+    meta = checkpoint.read_metadata(run_dir / "checkpoints")
+    config = training.config_from_json(meta["config"])
+    algo, single = training.make_learner(config, devices=jax.local_devices()[:1])
+    like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
+    tree, _ = checkpoint.restore(
+        run_dir / "checkpoints", training._checkpoint_tree(like, config.save_replay)
+    )
+    return single, jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tree["env_state"])
+
+
+def state_stats(data: mjx.Data) -> dict[str, float]:
+    """Active contacts, active constraint rows and Newton iterations per env."""
+    impl = data._impl
+    contacts = np.asarray(impl.contact.dist < 0).sum(-1)
+    rows = np.asarray(impl.efc_force != 0).sum(-1)
+    niter = np.asarray(impl.solver_niter)
+    return {
+        "active_contacts_mean": float(contacts.mean()),
+        "active_contacts_max": int(contacts.max()),
+        "active_constraint_rows_mean": float(rows.mean()),
+        "newton_iterations_mean": float(niter.mean()),
+        "newton_iterations_max": int(niter.max()),
+    }
+
+
+def measure(env, model: mjx.Model, data: mjx.Data, actions: jax.Array) -> dict:
+    """Physics steps/s over ``actions`` (T, B, 24) from ``data`` (B envs), plus stats."""
+    step = jax.jit(jax.vmap(lambda m, d, a: env.physics(d, a, m), in_axes=(None, 0, 0)))
+    t0 = time.perf_counter()
+    step_c = step.lower(model, data, actions[0]).compile()
+    compile_s = time.perf_counter() - t0
+    first = jax.block_until_ready(step_c(model, data, actions[0]))
+    t0 = time.perf_counter()
+    d = data
+    for a in actions:
+        d = step_c(model, d, a)
+    jax.block_until_ready(d)
+    seconds = time.perf_counter() - t0
+    n = actions.shape[0] * actions.shape[1] * env.n_substeps
+    return {"physics_steps_per_s": n / seconds, "compile_s": compile_s} | state_stats(first)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run-dir", type=Path, default=None,
+                        help="a training run whose last checkpoint supplies visited states")
+    parser.add_argument("--task", default="handshake", help="used without --run-dir")
+    parser.add_argument("--batch", type=int, default=64, help="episode starts (without a run)")
+    parser.add_argument("--control-steps", type=int, default=10)
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help=f"comma-separated subset of: {', '.join(VARIANTS)}")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    unknown = [v for v in args.variants.split(",") if v not in VARIANTS]
+    if unknown:
+        raise SystemExit(f"unknown variants {unknown}; expected some of {list(VARIANTS)}")
+
+    if args.run_dir is not None:
+        env, visited = training_states(args.run_dir)
+        state_sets = {"training states": visited}
+        batch = visited.qpos.shape[0]
+    else:
+        env = env_lib.make_env(args.task, mocap_source="synthetic")
+        state_sets, batch = {}, args.batch
+    starts = env_lib.BatchedEnv(env, batch).reset(jax.random.PRNGKey(0)).pipeline_state
+    state_sets = {"episode starts": starts} | state_sets
+    rng = np.random.default_rng(0)
+    actions = jax.numpy.asarray(
+        rng.uniform(-1, 1, (args.control_steps, batch, env.action_size)), np.float32
+    )
+    report = {
+        "machine": {"platform": platform.platform(), "device": str(jax.devices()[0])},
+        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "model": env_lib.model_sizes(env),
+        "batch": batch,
+        "control_steps": args.control_steps,
+        "results": [],
+    }
+    for name in args.variants.split(","):
+        model = variant_model(env, VARIANTS[name])
+        for states_name, data in state_sets.items():
+            row = {"variant": name, "states": states_name} | measure(env, model, data, actions)
+            report["results"].append(row)
+            print(json.dumps(row), flush=True)
+            if args.out:
+                args.out.write_text(json.dumps(report, indent=1))
+    return report
+
+
+if __name__ == "__main__":
+    main()
