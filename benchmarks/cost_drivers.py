@@ -68,18 +68,44 @@ def training_states(run_dir: Path) -> tuple[env_lib.HandInteractionEnv, mjx.Data
 
     meta = checkpoint.read_metadata(run_dir / "checkpoints")
     config = training.config_from_json(meta["config"])
-    algo, single = training.make_learner(config, devices=jax.local_devices()[:1])
+    num_devices = int(meta.get("num_devices", 1))
+    if len(jax.local_devices()) < num_devices:
+        raise SystemExit(
+            f"{run_dir} was trained on {num_devices} devices; run with as many "
+            f"(CPU: XLA_FLAGS=--xla_force_host_platform_device_count={num_devices})"
+        )
+    algo, single = training.make_learner(config, devices=jax.local_devices()[:num_devices])
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
     tree, _ = checkpoint.restore(
         run_dir / "checkpoints", training._checkpoint_tree(like, config.save_replay)
     )
-    return single, jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tree["env_state"])
+    # (devices, envs per device, ...) -> (envs, ...)
+    data = tree["env_state"].pipeline_state
+    return single, jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
+
+
+def on_model(model: mjx.Model, data: mjx.Data) -> mjx.Data:
+    """The physical state of a batch ``data`` in Data built for ``model``.
+
+    MJX fixes the contact and constraint-row layout when Data is made, so a variant
+    that changes them (contacts disabled) needs its own Data, not the env's.
+    """
+    fresh = mjx.make_data(model)
+
+    def one(d: mjx.Data) -> mjx.Data:
+        return fresh.replace(
+            qpos=d.qpos, qvel=d.qvel, act=d.act, ctrl=d.ctrl, time=d.time,
+            mocap_pos=d.mocap_pos, mocap_quat=d.mocap_quat, qacc_warmstart=d.qacc_warmstart,
+        )
+
+    return jax.vmap(one)(data)
 
 
 def state_stats(data: mjx.Data) -> dict[str, float]:
-    """Active contacts, active constraint rows and Newton iterations per env."""
+    """Active contacts, active constraint rows, and the Newton iterations of the last
+    substep's solve, per env (``data`` batched)."""
     impl = data._impl
-    contacts = np.asarray(impl.contact.dist < 0).sum(-1)
+    contacts = np.asarray(impl.contact.dist < impl.contact.includemargin).sum(-1)
     rows = np.asarray(impl.efc_force != 0).sum(-1)
     niter = np.asarray(impl.solver_niter)
     return {
@@ -147,6 +173,7 @@ def main(argv: list[str] | None = None) -> dict:
     for name in args.variants.split(","):
         model = variant_model(env, VARIANTS[name])
         for states_name, data in state_sets.items():
+            data = on_model(model, data)
             row = {"variant": name, "states": states_name} | measure(env, model, data, actions)
             report["results"].append(row)
             print(json.dumps(row), flush=True)

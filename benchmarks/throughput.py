@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> dict:
         "machine": {
             "platform": platform.platform(),
             "processor": platform.processor() or platform.machine(),
-            "cpu_count": nthread,
+            "cpu_count": os.cpu_count(),
             "jax_device": str(jax.devices()[0]),
             "device_kind": jax.devices()[0].device_kind,
         },

@@ -239,6 +239,11 @@ class HandInteractionEnv(Env):
 
     def reset(self, rng: jax.Array) -> State:
         """Start an episode with the paper's randomisation. rng: (2,) key."""
+        # Full float32 for the start pose's IK and forward kinematics too (see physics).
+        with jax.default_matmul_precision("highest"):
+            return self._reset(rng)
+
+    def _reset(self, rng: jax.Array) -> State:
         rng, k_demo, k_start, k_frame, k_box, k_pos, k_joint, k_rot = jax.random.split(rng, 8)
         p = self.params
         demo = jax.random.randint(k_demo, (), 0, p.t_min_step.shape[0])
@@ -363,6 +368,7 @@ class HandInteractionEnv(Env):
         reward = jnp.where(finite, terms["total"], state.reward)
         metrics = dict(state.metrics)  # entries that wrappers (e.g. Brax's) added stay
         metrics |= {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
+        metrics["reward/total"] = reward  # what the learner receives, diverged or not
         metrics["success"] = success
         metrics["diverged"] = 1.0 - finite.astype(jnp.float32)
         info = dict(state.info)

@@ -209,7 +209,8 @@ class MetricsLog:
         if self.tb is not None:
             step = int(row["train/env_steps"])
             for k, v in row.items():
-                if k not in ("epoch", "train/env_steps"):
+                # NaN means "nothing to report" (no episode ended): a gap, not a point.
+                if k not in ("epoch", "train/env_steps") and math.isfinite(v):
                     self.tb.add_scalar(k, v, step)
             self.tb.flush()
 
@@ -391,6 +392,8 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
 
     log = MetricsLog(run_dir)
     log.rows = [r for r in log.rows if r.get("epoch", 0) <= start_epoch]
+    # A resumed run's wall clock continues from where its kept rows end.
+    launched -= log.rows[-1].get("time/wall_seconds", 0.0) if log.rows else 0.0
     steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
     started = time.perf_counter()
     last_saved = start_epoch

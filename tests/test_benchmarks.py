@@ -9,6 +9,7 @@ import jax
 import mujoco
 import numpy as np
 import pytest
+from mujoco import mjx
 
 from benchmarks import replay as replay_bench
 from mjx_hands.agents.ddpg import replay
@@ -75,5 +76,11 @@ def test_cost_driver_variants_change_a_copy_of_the_model_only():
     assert one.opt.iterations == 1 != iterations == env.mj_model.opt.iterations
     assert no_contacts.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
     assert not env.mj_model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    # Contact rows are fixed when Data is made: the variant's states must be rebuilt.
+    batch = jax.tree.map(lambda x: x[None], mjx.make_data(env.mjx_model))
+    assert batch._impl.ncon > 0
+    rebuilt = cost_drivers.on_model(no_contacts, batch)
+    assert rebuilt._impl.ncon == 0
+    np.testing.assert_array_equal(rebuilt.qpos, batch.qpos)
     with pytest.raises(SystemExit, match="unknown variants"):
         cost_drivers.main(["--variants", "as built,fewer fingers"])
