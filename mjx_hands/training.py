@@ -245,6 +245,8 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
             [r["train/env_steps"] for r in train], [r["train/episode_return"] for r in train]
         )
     ax_return.set_xlabel("environment steps")
+    for a in (ax, ax_return):  # 1e5-scale step counts: plain tick labels run together
+        a.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
     ax_return.set_ylabel("training episode return (exploring)")
     ax_return.grid(alpha=0.3)
     fig.suptitle(title)
