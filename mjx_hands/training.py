@@ -287,7 +287,8 @@ def _from_checkpoint_tree(tree: dict[str, Any], fresh: TrainerState, algo: DDPG)
         env_steps=tree["env_steps"],
         buffer=tree.get("buffer", fresh.buffer),
     )
-    return jax.pmap(lambda tree: tree, devices=algo.devices)(state)  # one shard per device
+    # Laid out as the epoch's outputs: any other sharding retraces (and recompiles) the epoch.
+    return algo.to_devices(state)
 
 
 def config_to_json(config: TrainConfig) -> dict[str, Any]:
@@ -481,4 +482,5 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         if evals
         else {},
         "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
+        "epoch_compilations": algo.trace_count,  # 1 unless something forced a retrace
     }

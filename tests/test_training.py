@@ -79,6 +79,8 @@ def test_resume_equals_an_uninterrupted_run(tmp_path):
     )
     assert "resumed from epoch 2" in log.getvalue()
     assert resumed["epochs"] == 4
+    # The restored state must look to jit exactly like an epoch's output.
+    assert full["epoch_compilations"] == resumed["epoch_compilations"] == 1
 
     a, b = _learner(tmp_path / "full"), _learner(tmp_path / "split")
     assert int(a["learner"].updates) == int(b["learner"].updates) > 0

@@ -181,6 +181,9 @@ class DDPG:
         self._init = pmap(self._init_device)
         self._epoch = pmap(self._epoch_device, donate_argnums=0)
         self._evaluate = pmap(self._evaluate_device)
+        # Host arrays with a leading device axis -> one shard per device, laid out exactly
+        # as the epoch's outputs (same mesh axis name), so jit sees no new input sharding.
+        self.to_devices = pmap(lambda tree: tree)
 
     # ------------------------------------------------------------- networks
     def normalize(self, learner: LearnerState, obs: jax.Array) -> jax.Array:
