@@ -23,8 +23,13 @@ the environment can evaluate them against the *simulated* target hand:
 Required contact sensors per task (``REQUIRED_CONTACTS``, names of
 ``shadow_hand.CONTACT_SENSORS``); an episode succeeds when all of them touch:
 
-* ``handshake``: ``ff_middle, mf_middle, rf_middle, th_distal`` -- the fingers wrap
-  around the other hand and the thumb closes on its back.
+* ``handshake``: ``ff_middle, mf_middle, rf_middle`` -- the fingers wrap around the
+  other hand. The thumb is not required: replaying the demonstrations in simulation
+  (IK on the demonstrated palm pose, demonstrated finger angles as set-points) never
+  brought the thumb's distal phalanx into contact, with the recordings or with the
+  project's own demonstrations (0 of 32 episodes each), so a thumb requirement would
+  make success unreachable by following the human motion. Retargeted thumb angles are
+  the least accurate part of hand motion capture.
 * ``handclap``: ``ff/mf/rf_proximal`` and ``ff/mf/rf_middle`` -- flat fingers
   against the other's.
 * ``et``: ``ff_distal`` -- index fingertip to index fingertip.
@@ -70,7 +75,7 @@ N_CONTROLS = len(shadow_hand.ARM_JOINTS) + N_JOINTS  # 24
 _TIPS = slice(1, N_POINTS)  # fingertip rows of a HAND_POINTS array
 
 REQUIRED_CONTACTS = {
-    "handshake": ("ff_middle", "mf_middle", "rf_middle", "th_distal"),
+    "handshake": ("ff_middle", "mf_middle", "rf_middle"),
     "handclap": (
         "ff_proximal", "mf_proximal", "rf_proximal",
         "ff_middle", "mf_middle", "rf_middle",

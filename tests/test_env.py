@@ -223,3 +223,32 @@ def test_target_orientation_noise_rotates_the_whole_target_hand():
     np.testing.assert_allclose(palm, np.asarray(ep.target_pos), atol=1e-5)
     body = env.mj_model.body(scene.TARGET + "palm").id
     np.testing.assert_allclose(d.xmat[body].reshape(3, 3), rot, atol=1e-5)
+
+
+def test_demonstration_follower_tracks_the_demonstrated_palm(handshake_env, reset_state):
+    """The scripted follower (demo_replay) moves the palm along the demonstration: after
+    10 control steps it is clearly closer to the demonstrated palm position than holding
+    the start pose (the start lies on the demonstration, which moves on towards contact)."""
+    from mjx_hands import demo_replay
+
+    env, _, step = handshake_env
+    single = env.unwrapped
+    follow = jax.jit(jax.vmap(lambda s: demo_replay.follower_action(single, s)))
+    reference = jax.jit(jax.vmap(lambda s: demo_replay.reference_palm(single, s)[0]))
+    hold = 2.0 * (reset_state.pipeline_state.ctrl - single.ctrl_lo) / (
+        single.ctrl_hi - single.ctrl_lo
+    ) - 1.0
+
+    def palm_error(policy) -> np.ndarray:
+        state = reset_state
+        for _ in range(10):
+            target = reference(state)  # the demonstrated palm one step ahead
+            state = step(state, policy(state))
+        palm = state.pipeline_state.site_xpos[:, single.palm_site]
+        return np.linalg.norm(np.asarray(palm - target), axis=-1)
+
+    followed, held = palm_error(follow), palm_error(lambda s: hold)
+    assert np.all(np.isfinite(followed))
+    # Measured: 7 cm against 13 cm. Set-points lag a fast human reach by a few control
+    # steps, so the follower trails the demonstration; a wrong IK or sign would not gain.
+    assert np.median(followed) < 0.7 * np.median(held), (np.median(followed), np.median(held))

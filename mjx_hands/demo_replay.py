@@ -1,0 +1,126 @@
+"""Follow the demonstrations with a scripted controller; report the contacts they make.
+
+    python -m mjx_hands.demo_replay --task handshake [--episodes 32] [--mocap-source optitrack]
+
+Every control step the controller solves IK for the demonstrated palm pose of the
+next step (relative to the simulated target hand, as the reward's references are) and
+sends it, with the demonstrated finger angles, as position set-points; past the
+closest approach it holds that pose. Nothing is learned. It answers whether a task's
+required contacts can be reached by doing what the human did (see
+``reward_params.REQUIRED_CONTACTS``) and gives learned policies a reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_hands import env as env_lib
+from mjx_hands import ik, shadow_hand
+from mjx_hands.env import HandInteractionEnv
+
+
+def reference_palm(env: HandInteractionEnv, state) -> tuple[jax.Array, jax.Array]:
+    """World palm position (3,) and orientation (3, 3) the demonstration has at the next
+    control step of ``state``'s episode (single env)."""
+    episode = state.info["episode"]
+    last = env.params.ref_palm_pos.shape[1] - 1
+    k = jnp.minimum(episode.start_step + episode.step + 1, last)
+    pos = episode.target_pos + env.params.ref_palm_pos[episode.demo, k] @ episode.target_rot.T
+    rot = episode.target_rot @ env.params.ref_palm_rot[episode.demo, k]
+    return pos, rot
+
+
+def follower_action(env: HandInteractionEnv, state, ik_iterations: int = 10) -> jax.Array:
+    """(24,) action in [-1, 1] that moves toward the demonstration's next pose (single env)."""
+    episode = state.info["episode"]
+    last = env.params.ref_angles.shape[1] - 1
+    k = jnp.minimum(episode.start_step + episode.step + 1, last)
+    palm_pos, palm_rot = reference_palm(env, state)
+    qpos = state.pipeline_state.qpos
+    arm = ik.solve(env.chain, palm_pos, palm_rot, qpos[env.chain.qpos_adr], ik_iterations)
+    target = qpos.at[env.chain.qpos_adr].set(arm)  # arm + wrist from the IK
+    target = target.at[env.hand_qadr[2:]].set(env.params.ref_angles[episode.demo, k, 2:])
+    setpoints = target[env.actuated_qadr]
+    action = 2.0 * (setpoints - env.ctrl_lo) / (env.ctrl_hi - env.ctrl_lo) - 1.0
+    return jnp.clip(action, -1.0, 1.0)
+
+
+def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
+    """Run ``num_episodes`` whole episodes under the follower; a JSON-ready report."""
+    reset = jax.jit(jax.vmap(env.reset))
+    contacts = jax.vmap(env._contacts)
+
+    def step(state):
+        state = jax.vmap(env.step)(state, jax.vmap(lambda s: follower_action(env, s))(state))
+        return state, contacts(state.pipeline_state)
+
+    step = jax.jit(step)
+    state = reset(jax.random.split(rng, num_episodes))
+    required = np.asarray(env.params.required_contacts[0])
+    touched = np.zeros((num_episodes, len(shadow_hand.CONTACT_SENSORS)), bool)
+    most_required = np.zeros(num_episodes, int)
+    success = np.zeros(num_episodes, bool)
+    episode_return = np.zeros(num_episodes)
+    for _ in range(env.episode_length):
+        state, c = step(state)
+        c = np.asarray(c) > 0.5
+        touched |= c
+        most_required = np.maximum(most_required, c[:, required].sum(-1))
+        success |= np.asarray(state.info["success"]) > 0.5
+        episode_return += np.asarray(state.reward)
+    return {
+        "task": env.config.task,
+        "demonstrations": env.demos[0].source,
+        "episodes": num_episodes,
+        "success": float(success.mean()),
+        "mean_return": float(episode_return.mean()),
+        "touched": {
+            name: float(touched[:, i].mean()) for i, name in enumerate(shadow_hand.CONTACT_SENSORS)
+        },
+        "required": [n for n, r in zip(shadow_hand.CONTACT_SENSORS, required) if r],
+        "episodes_by_required_at_once": np.bincount(
+            most_required, minlength=int(required.sum()) + 1
+        ).tolist(),
+    }
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
+    parser.add_argument("--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic"))
+    parser.add_argument("--mocap", default=None, help="folder of the demonstrations")
+    parser.add_argument("--episodes", type=int, default=32)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="also write the report here (JSON)")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes must be at least 1, got {args.episodes}")
+    try:
+        env = HandInteractionEnv(
+            env_lib.EnvConfig(task=args.task, mocap_source=args.mocap_source, mocap_path=args.mocap)
+        )
+    except (ValueError, FileNotFoundError) as err:
+        raise SystemExit(f"error: {err}") from err
+    report = replay(env, args.episodes, jax.random.PRNGKey(args.seed))
+    print(
+        f"{report['task']} ({report['demonstrations']} demonstrations), {args.episodes} episodes: "
+        f"success {report['success']:.2f}, mean return {report['mean_return']:.1f}"
+    )
+    print("episodes by required sensors touching at once:", report["episodes_by_required_at_once"])
+    for name, share in report["touched"].items():
+        mark = "required" if name in report["required"] else ""
+        print(f"  {name:12s} touched in {share:4.0%} of episodes  {mark}")
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(report, f, indent=1)
+    return report
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
