@@ -52,7 +52,7 @@ def test_throughput_plot_from_the_recorded_results(tmp_path):
     from benchmarks import plot_throughput
 
     here = Path(plot_throughput.__file__).parent
-    recorded = [here / "results_cpu.json", here / "results_gpu.json"]
+    recorded = [here / "results_cpu.json", here / "results_gpu_h200.json", here / "results_gpu_h100.json"]
     out = tmp_path / "throughput.png"
     plot_throughput.main([*map(str, recorded), "--out", str(out)])
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
