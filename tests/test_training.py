@@ -11,6 +11,7 @@ import dataclasses
 import io
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -172,6 +173,34 @@ def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     for x, y in zip(jax.tree.leaves(before["learner"]), jax.tree.leaves(after["learner"])):
         np.testing.assert_array_equal(x, y)
         assert np.isfinite(x).all()
+
+
+class _TerminateAt(io.StringIO):
+    """Run output that sends this process SIGTERM once ``marker`` is printed."""
+
+    def __init__(self, marker: str):
+        super().__init__()
+        self.marker = marker
+
+    def write(self, text: str) -> int:
+        n = super().write(text)
+        if self.marker in text:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return n
+
+
+def test_sigterm_stops_the_run_like_ctrl_c_and_keeps_the_checkpoint(tmp_path):
+    run_dir = tmp_path / "run"
+    before = signal.getsignal(signal.SIGTERM)
+    out = _TerminateAt("epoch    2/")
+    result = training.run(
+        _config(run_dir, epochs=6, eval_every=1), out=out, env_factory=point_factory
+    )
+    assert result["stop_reason"] == "interrupted"
+    assert "interrupted; the last checkpoint (epoch 1)" in out.getvalue()
+    assert checkpoint.latest_step(run_dir / "checkpoints") == 1
+    assert (run_dir / "success.png").is_file()
+    assert signal.getsignal(signal.SIGTERM) is before  # the caller's handler is back
 
 
 def _train_py(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
