@@ -3,8 +3,10 @@
 Times one control period (all substeps) of vmapped MJX physics from two sets of
 states: fresh episode starts, and the environment states a training run had reached
 when it saved its last checkpoint (the policy's own distribution: hands closer,
-more contacts). For each solver variant it reports physics steps/s and, from the
-states after one control period, active contacts and active constraint rows.
+more contacts). For each variant (solver settings, contacts, MJX's contact cap) it
+reports physics steps/s; from the states after one control period, active contacts
+and active constraint rows; and how far the final poses lie from native MuJoCo's
+(float64, no contact cap, the scene as built) from the same states and set-points.
 
     python -m benchmarks.cost_drivers --run-dir runs/et-cpu --out benchmarks/results_cost_cpu.json
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import os
 import platform
 import time
 from collections.abc import Callable
@@ -24,6 +27,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from benchmarks import throughput
 from mjx_hands import env as env_lib
 
 
@@ -45,11 +49,24 @@ def _no_contacts(m: mujoco.MjModel) -> None:
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
 
 
+def _contact_cap(pairs: int, points: int) -> Callable[[mujoco.MjModel], None]:
+    """MJX keeps the ``pairs`` closest geom pairs per collision-function group and at
+    most ``points`` contacts (the scene's numerics; native MuJoCo has no cap)."""
+
+    def change(m: mujoco.MjModel) -> None:
+        for name, value in (("max_geom_pairs", pairs), ("max_contact_points", points)):
+            m.numeric_data[m.numeric_adr[m.numeric(name).id]] = value
+
+    return change
+
+
 VARIANTS: dict[str, Callable[[mujoco.MjModel], None] | None] = {
     "as built": None,
     "1 Newton iteration": _iterations(1),
     "2 line-search iterations": _ls_iterations(2),
     "contacts disabled": _no_contacts,
+    "contact cap 24 pairs / 48 points": _contact_cap(24, 48),
+    "contact cap 48 pairs / 96 points": _contact_cap(48, 96),
 }
 
 
@@ -63,21 +80,12 @@ def variant_model(env: env_lib.HandInteractionEnv, change) -> mjx.Model:
 
 def training_states(run_dir: Path) -> tuple[env_lib.HandInteractionEnv, mjx.Data]:
     """The single env of a run and its batch of env states at the last checkpoint."""
-    from mjx_hands import checkpoint, training
+    from mjx_hands import checkpoint, evaluate
 
-    meta = checkpoint.read_metadata(run_dir / "checkpoints")
-    config = training.config_from_json(meta["config"])
-    num_devices = int(meta.get("num_devices", 1))
-    if len(jax.local_devices()) < num_devices:
-        raise SystemExit(
-            f"{run_dir} was trained on {num_devices} devices; run with as many "
-            f"(CPU: XLA_FLAGS=--xla_force_host_platform_device_count={num_devices})"
-        )
-    algo, single = training.make_learner(config, devices=jax.local_devices()[:num_devices])
-    like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
-    tree, _ = checkpoint.restore(
-        run_dir / "checkpoints", training._checkpoint_tree(like, config.save_replay)
-    )
+    try:
+        _, tree, _, single = evaluate.restore_run(run_dir)
+    except checkpoint.CheckpointError as err:
+        raise SystemExit(f"error: {err}") from err
     # (devices, envs per device, ...) -> (envs, ...)
     data = tree["env_state"].pipeline_state
     return single, jax.tree.map(lambda x: x.reshape((x.shape[0] * x.shape[1],) + x.shape[2:]), data)
@@ -123,17 +131,19 @@ def compile_physics(env, model: mjx.Model, data: mjx.Data, action: jax.Array):
     return compiled, time.perf_counter() - t0
 
 
-def measure(env, step, data: mjx.Data, actions: jax.Array) -> dict:
-    """Physics steps/s over ``actions`` (T, B, 24) from ``data`` (B envs), plus stats."""
-    first = jax.block_until_ready(step(data, actions[0]))
-    t0 = time.perf_counter()
-    d = data
-    for a in actions:
-        d = step(d, a)
-    jax.block_until_ready(d)
-    seconds = time.perf_counter() - t0
+def measure(env, step, data: mjx.Data, actions: jax.Array, native_qpos=None) -> dict:
+    """Physics steps/s over ``actions`` (T, B, 24) from ``data`` (B envs), plus stats and,
+    given native MuJoCo's final qpos (B, nq) from the same starts, the gaps to it."""
+    stats = state_stats(jax.block_until_ready(step(data, actions[0])))
+    _, seconds = throughput._time_loop(step, data, actions)
     n = actions.shape[0] * actions.shape[1] * env.n_substeps
-    return {"physics_steps_per_s": n / seconds} | state_stats(first)
+    row = {"physics_steps_per_s": n / seconds} | stats
+    if native_qpos is not None:
+        final = data
+        for a in actions:  # untimed: exactly the sequence native MuJoCo ran
+            final = step(final, a)
+        row |= throughput.qpos_gaps(np.asarray(final.qpos), native_qpos)
+    return row
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -172,6 +182,11 @@ def main(argv: list[str] | None = None) -> dict:
         "control_steps": args.control_steps,
         "results": [],
     }
+    # The reference: native MuJoCo (float64, no contact cap) on the scene as built.
+    native_qpos = {
+        name: throughput.measure_native(env, data, actions, os.cpu_count() or 1)["_qpos"]
+        for name, data in state_sets.items()
+    }
     for name in args.variants.split(","):
         model = variant_model(env, VARIANTS[name])
         step = compile_s = None
@@ -180,7 +195,7 @@ def main(argv: list[str] | None = None) -> dict:
             if step is None:  # every state set has the same batch: one compile per variant
                 step, compile_s = compile_physics(env, model, data, actions[0])
             row = {"variant": name, "states": states_name, "compile_s": compile_s}
-            row |= measure(env, step, data, actions)
+            row |= measure(env, step, data, actions, native_qpos[states_name])
             report["results"].append(row)
             print(json.dumps(row), flush=True)
             if args.out:

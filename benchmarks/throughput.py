@@ -89,17 +89,33 @@ def measure_mjx(
     return result | {"_start": state, "_actions": actions, "_qpos": np.asarray(final.qpos)}
 
 
-def measure_native(env: env_lib.HandInteractionEnv, start, actions, nthread: int) -> dict:
-    """``mujoco.rollout`` on all threads, same starts and set-points as MJX."""
+def qpos_gaps(mjx_qpos: np.ndarray, native_qpos: np.ndarray) -> dict:
+    """How far MJX (float32) and native MuJoCo (float64) ended apart; qpos (B, nq) each.
+
+    Contact-rich motion under random set-points is chaotic: a rounding difference can
+    send one env's finger to the other side of a contact, so the largest gap over
+    thousands of envs grows with the batch and the horizon while the typical env still
+    agrees. The median and the share of envs within 1e-3 say which case it is.
+    """
+    per_env = np.abs(mjx_qpos - native_qpos).max(axis=-1)  # (B,)
+    return {
+        "max_qpos_gap_vs_native": float(per_env.max()),
+        "median_qpos_gap_vs_native": float(np.median(per_env)),
+        "share_envs_qpos_gap_below_1e-3": float(np.mean(per_env < 1e-3)),
+    }
+
+
+def measure_native(env: env_lib.HandInteractionEnv, data, actions, nthread: int) -> dict:
+    """``mujoco.rollout`` on all threads from the batch ``data`` (mjx.Data) under the
+    set-points ``actions`` (T, B, 24), as MJX runs them."""
     m = env.mj_model
     batch = actions.shape[1]
-    data = start.pipeline_state
     d = mujoco.MjData(m)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = np.zeros((batch, mujoco.mj_stateSize(m, spec)))
     for i in range(batch):
         d.qpos[:] = np.asarray(data.qpos[i])
-        d.qvel[:] = 0.0
+        d.qvel[:] = np.asarray(data.qvel[i])
         d.mocap_pos[:] = np.asarray(data.mocap_pos[i])
         d.mocap_quat[:] = np.asarray(data.mocap_quat[i])
         mujoco.mj_getState(m, d, states[i], spec)
@@ -164,9 +180,9 @@ def main(argv: list[str] | None = None) -> dict:
     )
     for batch in batches:
         res = measure_mjx(env, batch, args.control_steps, env_step=batch in env_step_batches)
-        native = measure_native(env, res.pop("_start"), res.pop("_actions"), nthread)
+        native = measure_native(env, res.pop("_start").pipeline_state, res.pop("_actions"), nthread)
         # Same starts, same set-points: the two simulators must end in nearly the same pose.
-        res["max_qpos_gap_vs_native"] = float(np.abs(res.pop("_qpos") - native.pop("_qpos")).max())
+        res |= qpos_gaps(res.pop("_qpos"), native.pop("_qpos"))
         res["native"] = native
         res["mjx_over_native"] = res["physics_steps_per_s"] / native["physics_steps_per_s"]
         report["results"].append(res)

@@ -49,12 +49,18 @@ class EvalArgs:
     """Video height in pixels."""
 
 
-def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
-    """(algo, unreplicated learner, config) of a run's checkpoint; nothing is compiled."""
+def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = None):
+    """(algo, checkpoint tree, config, single env) of a run's checkpoint; nothing compiled.
+
+    The tree is what training saved: ``learner``, ``env_state`` (leaves with a leading
+    device axis), ... ``eval_envs`` overrides the run's evaluation batch.
+    """
     ckpt_dir = Path(run_dir) / "checkpoints"
     meta = checkpoint.read_metadata(ckpt_dir, step)
     config = training.config_from_json(meta["config"])
-    config = dataclasses.replace(config, eval_envs=eval_envs, resume=False)
+    config = dataclasses.replace(config, resume=False)
+    if eval_envs is not None:
+        config = dataclasses.replace(config, eval_envs=eval_envs)
     num_devices = int(meta.get("num_devices", 1))
     devices = jax.local_devices()
     if num_devices != len(devices):
@@ -68,6 +74,12 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
     tree, _ = checkpoint.restore(
         ckpt_dir, training._checkpoint_tree(like, config.save_replay), step
     )
+    return algo, tree, config, single
+
+
+def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
+    """(algo, unreplicated learner, config, single env) of a run's checkpoint."""
+    algo, tree, config, single = restore_run(run_dir, step, eval_envs)
     return algo, tree["learner"], config, single
 
 

@@ -82,5 +82,11 @@ def test_cost_driver_variants_change_a_copy_of_the_model_only():
     rebuilt = cost_drivers.on_model(no_contacts, batch)
     assert rebuilt._impl.ncon == 0
     np.testing.assert_array_equal(rebuilt.qpos, batch.qpos)
+    # A larger contact cap gives MJX room for more contacts; the env's model keeps its cap.
+    cap = cost_drivers.variant_model(env, cost_drivers.VARIANTS["contact cap 24 pairs / 48 points"])
+    assert cost_drivers.on_model(cap, batch)._impl.ncon > batch._impl.ncon
+    cfg = env.config.scene
+    assert env.mj_model.numeric("max_contact_points").data[0] == cfg.max_contact_points
+    assert env.mj_model.numeric("max_geom_pairs").data[0] == cfg.max_geom_pairs
     with pytest.raises(SystemExit, match="unknown variants"):
         cost_drivers.main(["--variants", "as built,fewer fingers"])
