@@ -1,6 +1,7 @@
 """Throughput against batch size, MJX beside native MuJoCo, from throughput JSON files.
 
-    python -m benchmarks.plot_throughput benchmarks/results_cpu.json benchmarks/results_gpu_h200.json benchmarks/results_gpu_h100.json \\
+    python -m benchmarks.plot_throughput benchmarks/results_cpu.json \\
+        benchmarks/results_gpu_h200.json benchmarks/results_gpu_h100.json \\
         --out benchmarks/throughput.png
 """
 

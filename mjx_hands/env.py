@@ -311,6 +311,7 @@ class HandInteractionEnv(Env):
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
         metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
+        metrics |= {f"contact/{name}": zero for name in sh.CONTACT_SENSORS}
         return State(
             pipeline_state=data,
             obs=self._observation(features, episode),
@@ -371,6 +372,11 @@ class HandInteractionEnv(Env):
         metrics["reward/total"] = reward  # what the learner receives, diverged or not
         metrics["success"] = success
         metrics["diverged"] = 1.0 - finite.astype(jnp.float32)
+        # Each sensor's reading: which of the required contacts a policy still misses.
+        metrics |= {
+            f"contact/{name}": jnp.where(finite, features["contacts"][i], 0.0)
+            for i, name in enumerate(sh.CONTACT_SENSORS)
+        }
         info = dict(state.info)
         info.update(
             episode=episode,

@@ -76,6 +76,10 @@ def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_sta
         state = step(state, action)
         if t < length - 1:
             assert not np.any(np.asarray(state.done))
+        if t == length // 2:  # the per-sensor metrics are the sensors' readings
+            readings = np.asarray(jax.jit(jax.vmap(env.unwrapped._contacts))(state.pipeline_state))
+            logged = np.stack([state.metrics[f"contact/{n}"] for n in sh.CONTACT_SENSORS], -1)
+            np.testing.assert_array_equal(logged, readings)
     assert np.all(np.isfinite(np.asarray(state.obs)))
     assert np.all(np.isfinite(np.asarray(state.reward)))
     assert np.all(np.isfinite(np.asarray(state.pipeline_state.qpos)))
