@@ -286,7 +286,9 @@ def test_variants():
 
 
 def test_required_contacts_are_sensors():
-    assert rp.required_contact_mask("handshake").sum() == 4
+    names = rp.shadow_hand.CONTACT_SENSORS
+    handshake = rp.required_contact_mask("handshake")
+    assert [names[i] for i in np.flatnonzero(handshake)] == ["ff_middle", "mf_middle", "rf_middle"]
     assert rp.required_contact_mask("handclap").sum() == 6
     assert np.flatnonzero(rp.required_contact_mask("et")).tolist() == [3]  # ff_distal
     with pytest.raises(ValueError, match="unknown task"):
