@@ -25,12 +25,17 @@ from mjx_hands import ik, shadow_hand
 from mjx_hands.env import HandInteractionEnv
 
 
+def _next_step(env: HandInteractionEnv, state) -> jax.Array:
+    """Row of the demonstration's references for the next control step (held at the end)."""
+    episode = state.info["episode"]
+    return jnp.minimum(episode.start_step + episode.step + 1, env.params.ref_angles.shape[1] - 1)
+
+
 def reference_palm(env: HandInteractionEnv, state) -> tuple[jax.Array, jax.Array]:
     """World palm position (3,) and orientation (3, 3) the demonstration has at the next
     control step of ``state``'s episode (single env)."""
     episode = state.info["episode"]
-    last = env.params.ref_palm_pos.shape[1] - 1
-    k = jnp.minimum(episode.start_step + episode.step + 1, last)
+    k = _next_step(env, state)
     pos = episode.target_pos + env.params.ref_palm_pos[episode.demo, k] @ episode.target_rot.T
     rot = episode.target_rot @ env.params.ref_palm_rot[episode.demo, k]
     return pos, rot
@@ -38,29 +43,22 @@ def reference_palm(env: HandInteractionEnv, state) -> tuple[jax.Array, jax.Array
 
 def follower_action(env: HandInteractionEnv, state, ik_iterations: int = 10) -> jax.Array:
     """(24,) action in [-1, 1] that moves toward the demonstration's next pose (single env)."""
-    episode = state.info["episode"]
-    last = env.params.ref_angles.shape[1] - 1
-    k = jnp.minimum(episode.start_step + episode.step + 1, last)
+    demo = state.info["episode"].demo
     palm_pos, palm_rot = reference_palm(env, state)
     qpos = state.pipeline_state.qpos
     arm = ik.solve(env.chain, palm_pos, palm_rot, qpos[env.chain.qpos_adr], ik_iterations)
     target = qpos.at[env.chain.qpos_adr].set(arm)  # arm + wrist from the IK
-    target = target.at[env.hand_qadr[2:]].set(env.params.ref_angles[episode.demo, k, 2:])
-    setpoints = target[env.actuated_qadr]
-    action = 2.0 * (setpoints - env.ctrl_lo) / (env.ctrl_hi - env.ctrl_lo) - 1.0
-    return jnp.clip(action, -1.0, 1.0)
+    fingers = env.params.ref_angles[demo, _next_step(env, state), 2:]
+    target = target.at[env.hand_qadr[2:]].set(fingers)
+    return env.action_for(target[env.actuated_qadr])
 
 
 def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
     """Run ``num_episodes`` whole episodes under the follower; a JSON-ready report."""
     reset = jax.jit(jax.vmap(env.reset))
-    contacts = jax.vmap(env._contacts)
-
-    def step(state):
-        state = jax.vmap(env.step)(state, jax.vmap(lambda s: follower_action(env, s))(state))
-        return state, contacts(state.pipeline_state)
-
-    step = jax.jit(step)
+    step = jax.jit(
+        lambda state: jax.vmap(env.step)(state, jax.vmap(lambda s: follower_action(env, s))(state))
+    )
     state = reset(jax.random.split(rng, num_episodes))
     required = np.asarray(env.params.required_contacts[0])
     touched = np.zeros((num_episodes, len(shadow_hand.CONTACT_SENSORS)), bool)
@@ -68,8 +66,10 @@ def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
     success = np.zeros(num_episodes, bool)
     episode_return = np.zeros(num_episodes)
     for _ in range(env.episode_length):
-        state, c = step(state)
-        c = np.asarray(c) > 0.5
+        state = step(state)
+        # The env logs each sensor's reading (contact/<sensor>) with every step.
+        c = np.stack([state.metrics[f"contact/{n}"] for n in shadow_hand.CONTACT_SENSORS], -1)
+        c = c > 0.5
         touched |= c
         most_required = np.maximum(most_required, c[:, required].sum(-1))
         success |= np.asarray(state.info["success"]) > 0.5
@@ -83,7 +83,7 @@ def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
         "touched": {
             name: float(touched[:, i].mean()) for i, name in enumerate(shadow_hand.CONTACT_SENSORS)
         },
-        "required": [n for n, r in zip(shadow_hand.CONTACT_SENSORS, required) if r],
+        "required": [n for n, r in zip(shadow_hand.CONTACT_SENSORS, required, strict=True) if r],
         "episodes_by_required_at_once": np.bincount(
             most_required, minlength=int(required.sum()) + 1
         ).tolist(),

@@ -337,6 +337,12 @@ class HandInteractionEnv(Env):
         with jax.default_matmul_precision("highest"):
             return jax.lax.fori_loop(0, self.n_substeps, lambda _, d: mjx.step(model, d), data)
 
+    def action_for(self, setpoints: jax.Array) -> jax.Array:
+        """The action (24,) in [-1, 1] whose set-points :meth:`physics` makes ``setpoints``
+        (24,) (clipped to the actuators' ranges): the inverse of its mapping."""
+        action = 2.0 * (setpoints - self.ctrl_lo) / (self.ctrl_hi - self.ctrl_lo) - 1.0
+        return jnp.clip(action, -1.0, 1.0)
+
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)

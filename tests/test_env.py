@@ -239,9 +239,7 @@ def test_demonstration_follower_tracks_the_demonstrated_palm(handshake_env, rese
     single = env.unwrapped
     follow = jax.jit(jax.vmap(lambda s: demo_replay.follower_action(single, s)))
     reference = jax.jit(jax.vmap(lambda s: demo_replay.reference_palm(single, s)[0]))
-    hold = 2.0 * (reset_state.pipeline_state.ctrl - single.ctrl_lo) / (
-        single.ctrl_hi - single.ctrl_lo
-    ) - 1.0
+    hold = jax.vmap(single.action_for)(reset_state.pipeline_state.ctrl)
 
     def palm_error(policy) -> np.ndarray:
         state = reset_state
