@@ -3,6 +3,11 @@
 ``make_env`` is imported lazily so that ``import mjx_hands`` stays cheap.
 """
 
+from mjx_hands import xla_flags
+
+# Before JAX starts a backend: MJX physics on CPU is ~4x faster with it (see xla_flags).
+xla_flags.configure_cpu_codegen()
+
 __all__ = ["TASKS", "make_env"]
 TASKS = ("handshake", "handclap", "et")
 

@@ -1,0 +1,61 @@
+"""mjx_hands sets its CPU code-generation flag only where XLA will read it safely."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from mjx_hands import xla_flags
+
+PROBE = """
+import json, os, sys, warnings
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    if sys.argv[1] == "jax-first":
+        import jax.numpy as jnp
+        jnp.ones(1).block_until_ready()  # starts the CPU backend
+    import mjx_hands
+    import jax
+    jax.numpy.ones(1).block_until_ready()  # XLA parses XLA_FLAGS (aborts on unknown flags)
+messages = [str(w.message) for w in caught]
+print(json.dumps({"flags": os.environ.get("XLA_FLAGS"), "warnings": messages}))
+"""
+
+
+def _probe(mode: str, xla_flags_env: str | None) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    if xla_flags_env is not None:
+        env["XLA_FLAGS"] = xla_flags_env
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, mode], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def test_import_adds_the_flag_and_keeps_the_users_flags():
+    if not xla_flags._jaxlib_knows(xla_flags.FLAG_NAME):
+        assert _probe("plain", None)["flags"] is None  # an unknown flag would abort XLA
+        return
+    assert _probe("plain", None)["flags"] == xla_flags.FLAG
+    got = _probe("plain", "--xla_force_host_platform_device_count=2")["flags"]
+    assert got.split() == ["--xla_force_host_platform_device_count=2", xla_flags.FLAG]
+
+
+def test_an_explicit_user_choice_wins():
+    mine = "--xla_cpu_use_fusion_emitters=true"
+    got = _probe("plain", mine)
+    assert got["flags"] == mine and not got["warnings"]
+
+
+def test_jax_started_first_leaves_flags_alone_and_says_why():
+    got = _probe("jax-first", None)
+    assert got["flags"] is None
+    if xla_flags._jaxlib_knows(xla_flags.FLAG_NAME):
+        assert any("JAX started before mjx_hands" in w for w in got["warnings"])
+
+
+def test_the_binary_probe_tells_known_from_unknown_flags():
+    assert not xla_flags._jaxlib_knows("xla_cpu_no_such_flag_" + "0123456789abcdef")
