@@ -44,6 +44,7 @@ def test_throughput_quick_mode_runs_mjx_and_native_on_the_same_sequence(tmp_path
     assert json.loads(out.read_text()) == report
     (result,) = report["results"]
     assert result["batch"] == 2 and result["finite"]
+    assert set(result["compile_s"]) == {"physics"}  # starts from native MuJoCo: one compile
     assert result["physics_steps_per_s"] > 0 and result["native"]["physics_steps_per_s"] > 0
     assert result["max_qpos_gap_vs_native"] < 1e-4  # measured ~1e-7
 
