@@ -26,12 +26,17 @@ FLAG = f"--{FLAG_NAME}=false"
 
 
 def _jaxlib_knows(flag_name: str) -> bool:
-    """Whether the installed jaxlib's XLA defines ``flag_name`` (its name is in the binary)."""
+    """Whether the installed jaxlib's XLA registers the flag ``flag_name``.
+
+    The flag parser's table holds each name as a C string (NUL on both sides); the
+    DebugOptions proto descriptor, which can keep a removed flag's field, stores names
+    length-prefixed, so it does not count.
+    """
     try:
         import jaxlib
     except ImportError:
         return False
-    needle = flag_name.encode()
+    needle = b"\0" + flag_name.encode() + b"\0"
     for lib in Path(jaxlib.__file__).parent.glob("*.so"):
         with open(lib, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             if mm.find(needle) >= 0:

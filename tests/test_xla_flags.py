@@ -59,3 +59,18 @@ def test_jax_started_first_leaves_flags_alone_and_says_why():
 
 def test_the_binary_probe_tells_known_from_unknown_flags():
     assert not xla_flags._jaxlib_knows("xla_cpu_no_such_flag_" + "0123456789abcdef")
+
+
+def test_only_a_registered_flag_counts_not_a_leftover_proto_field(tmp_path, monkeypatch):
+    """A flag XLA removed can keep its DebugOptions proto field (a length-prefixed name);
+    setting it would abort XLA, so only the parser's C-string name counts."""
+    import types
+
+    fake = types.ModuleType("jaxlib")
+    fake.__file__ = str(tmp_path / "__init__.py")
+    monkeypatch.setitem(sys.modules, "jaxlib", fake)
+    name = b"xla_cpu_made_up_flag"
+    (tmp_path / "libproto.so").write_bytes(b"\x12\x14\n" + bytes([len(name)]) + name + b"\x18")
+    assert not xla_flags._jaxlib_knows(name.decode())
+    (tmp_path / "libflags.so").write_bytes(b"Dump IR.\x00" + name + b"\x00Other help.")
+    assert xla_flags._jaxlib_knows(name.decode())
