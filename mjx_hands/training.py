@@ -464,6 +464,8 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
                 row |= algo.evaluate(state, eval_key)
             log.append(row)
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
+            if config.max_minutes is not None:  # whichever budget ends the run first
+                remaining = min(remaining, max(60 * config.max_minutes - elapsed, 0.0))
             rate = row["time/env_steps_per_second"]
             line = f"epoch {epoch:4d}/{config.epochs}  {rate:8,.0f} steps/s  "
             if metrics["train/episodes"] > 0:
