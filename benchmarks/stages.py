@@ -66,9 +66,8 @@ def time_compiled(fn, data, repeats: int) -> tuple[float, float, object]:
     return (time.perf_counter() - t0) / repeats, compile_s, out
 
 
-def measure(batch: int, repeats: int) -> dict:
+def measure(env: env_lib.HandInteractionEnv, batch: int, repeats: int) -> dict:
     """Per-stage and whole-step milliseconds per batched call at ``batch`` envs."""
-    env = env_lib.make_env("handshake", mocap_source="synthetic")
     model = env.mjx_model
     data = env_lib.BatchedEnv(env, batch).reset(jax.random.PRNGKey(0)).pipeline_state
     rows = []
@@ -99,6 +98,7 @@ def main(argv: list[str] | None = None) -> dict:
     )
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    env = env_lib.make_env("handshake", mocap_source="synthetic")
     report = {
         "machine": {
             "platform": platform.platform(),
@@ -106,20 +106,19 @@ def main(argv: list[str] | None = None) -> dict:
             "device": str(jax.devices()[0]),
         },
         "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
-        "model": env_lib.model_sizes(env_lib.make_env("handshake", mocap_source="synthetic")),
+        "model": env_lib.model_sizes(env),
         "batch": args.batch,
-        "runs": [measure(args.batch, args.repeats)],
+        "runs": [measure(env, args.batch, args.repeats)],
     }
     if args.compare_xla_default:
         flags = os.environ.get("XLA_FLAGS", "").replace(xla_flags.FLAG, "")
-        env = os.environ | {"XLA_FLAGS": f"{flags} --{xla_flags.FLAG_NAME}=true".strip()}
+        child_env = os.environ | {"XLA_FLAGS": f"{flags} --{xla_flags.FLAG_NAME}=true".strip()}
         cmd = [sys.executable, "-m", "benchmarks.stages", "--batch", str(args.batch),
                "--repeats", str(args.repeats)]
         with tempfile.TemporaryDirectory() as tmp:
             other = Path(tmp) / "default.json"
-            subprocess.run(
-                cmd + ["--out", str(other)], env=env, check=True, cwd=Path(__file__).parents[1]
-            )
+            repo = Path(__file__).parents[1]
+            subprocess.run(cmd + ["--out", str(other)], env=child_env, check=True, cwd=repo)
             report["runs"] += json.loads(other.read_text())["runs"]
     if args.out:
         args.out.write_text(json.dumps(report, indent=1))

@@ -59,7 +59,6 @@ def native_starts(env: env_lib.HandInteractionEnv, batch: int, seed: int = 0) ->
     for _ in range(batch):
         d = mujoco.MjData(m)
         d.qpos[:] = np.clip(m.qpos0 + 0.05 * rng.standard_normal(m.nq), env.jnt_lo, env.jnt_hi)
-        d.ctrl[:] = d.qpos[env.actuated_qadr]
         mujoco.mj_forward(m, d)
         datas.append(mjx.put_data(m, d))
     return jax.tree.map(lambda *xs: jnp.stack(xs), *datas)
