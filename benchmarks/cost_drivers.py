@@ -45,6 +45,16 @@ def _ls_iterations(n: int) -> Callable[[mujoco.MjModel], None]:
     return change
 
 
+def _tolerance(tol: float) -> Callable[[mujoco.MjModel], None]:
+    """The solver stops once its cost improvement or gradient (scaled) falls below ``tol``
+    (MuJoCo's default 1e-8 is near float32 resolution, so MJX rarely stops early)."""
+
+    def change(m: mujoco.MjModel) -> None:
+        m.opt.tolerance = tol
+
+    return change
+
+
 def _no_contacts(m: mujoco.MjModel) -> None:
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
 
@@ -60,11 +70,39 @@ def _contact_cap(pairs: int, points: int) -> Callable[[mujoco.MjModel], None]:
     return change
 
 
+def _palm_capsules(m: mujoco.MjModel) -> None:
+    """Each palm box becomes one capsule along its longest side (radius: its smallest
+    half-extent): every agent-target pair is then capsule-capsule, one collision-function
+    group instead of three (capsule-capsule, box-capsule, box-box)."""
+    colliding = np.union1d(m.pair_geom1, m.pair_geom2)
+    for g in colliding[m.geom_type[colliding] == mujoco.mjtGeom.mjGEOM_BOX]:
+        half = m.geom_size[g].copy()
+        if not np.allclose(m.geom_quat[g], [1, 0, 0, 0]) or np.argmax(half) != 2:
+            raise ValueError(f"palm box {m.geom(g).name} is not aligned with its body's z axis")
+        radius = half.min()
+        m.geom_type[g] = mujoco.mjtGeom.mjGEOM_CAPSULE
+        m.geom_size[g] = [radius, half[2] - radius, 0.0]
+        m.geom_rbound[g] = half[2]
+
+
+def _combined(*changes: Callable[[mujoco.MjModel], None]) -> Callable[[mujoco.MjModel], None]:
+    def change(m: mujoco.MjModel) -> None:
+        for c in changes:
+            c(m)
+
+    return change
+
+
 VARIANTS: dict[str, Callable[[mujoco.MjModel], None] | None] = {
     "as built": None,
     "1 Newton iteration": _iterations(1),
+    "2 Newton iterations": _iterations(2),
     "2 line-search iterations": _ls_iterations(2),
+    "tolerance 1e-5": _tolerance(1e-5),
     "contacts disabled": _no_contacts,
+    "contacts disabled + 1 Newton iteration": _combined(_no_contacts, _iterations(1)),
+    "palm capsules": _palm_capsules,
+    "palm capsules + 1 Newton iteration": _combined(_palm_capsules, _iterations(1)),
     "contact cap 24 pairs / 48 points": _contact_cap(24, 48),
     "contact cap 48 pairs / 96 points": _contact_cap(48, 96),
 }
@@ -183,10 +221,12 @@ def main(argv: list[str] | None = None) -> dict:
         "results": [],
     }
     # The reference: native MuJoCo (float64, no contact cap) on the scene as built.
-    native_qpos = {
-        name: throughput.measure_native(env, data, actions, os.cpu_count() or 1)["_qpos"]
+    native = {
+        name: throughput.measure_native(env, data, actions, os.cpu_count() or 1)
         for name, data in state_sets.items()
     }
+    native_qpos = {name: run.pop("_qpos") for name, run in native.items()}
+    report["native"] = native
     for name in args.variants.split(","):
         model = variant_model(env, VARIANTS[name])
         step = compile_s = None
@@ -196,6 +236,8 @@ def main(argv: list[str] | None = None) -> dict:
                 step, compile_s = compile_physics(env, model, data, actions[0])
             row = {"variant": name, "states": states_name, "compile_s": compile_s}
             row |= measure(env, step, data, actions, native_qpos[states_name])
+            native_rate = native[states_name]["physics_steps_per_s"]
+            row["x_native"] = row["physics_steps_per_s"] / native_rate
             report["results"].append(row)
             print(json.dumps(row), flush=True)
             if args.out:

@@ -15,7 +15,9 @@ Episode randomisation (the paper's training method):
 * the start step ``t_s`` uniformly in ``[1, t_min - t_off]``: the agent's palm is
   put at the actor's palm pose of that step (plus Gaussian noise) by inverse
   kinematics of the arm and wrist, the fingers at the actor's angles (plus noise),
-  and the imitation reference runs from there.
+  and the imitation reference runs from there. A start whose hands interpenetrate
+  (robot arm and Shadow hand are not the human's: IK misses, fingers overlap) moves
+  earlier along the same demonstration until they are apart (``_separated_start``).
 
 Observation (``observation_size`` = 145), in this order:
 
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -126,6 +129,13 @@ class EnvConfig:
     """Std of the Gaussian noise on the starting finger angles, radians."""
     contact_distance: float = 0.002
     """A sensor reads 1 when one of its geoms is closer than this to the target, metres."""
+    start_max_penetration: float = 0.001
+    """Deepest agent-target interpenetration (metres) a start may have; a deeper one
+    starts earlier in the demonstration (see ``HandInteractionEnv._separated_start``)."""
+    start_backoff_steps: int = 5
+    """Control steps each retreat moves the start earlier."""
+    start_retreats: int = 8
+    """Most retreats per start; 0 keeps every drawn start as it is (the paper's)."""
     ik_iterations: int = 30
     """Damped least-squares iterations placing the arm at the start pose."""
     scene: scene.SceneConfig = scene.SceneConfig()
@@ -273,28 +283,21 @@ class HandInteractionEnv(Env):
             target_points, target_frames, p.j_min[demo], p.goal_offsets[demo]
         )
 
-        palm_goal = to_world(p.ref_palm_pos[demo, start])
-        palm_goal = palm_goal + self.config.start_position_noise * jax.random.normal(k_pos, (3,))
-        palm_rot = target_rot @ p.ref_palm_rot[demo, start]
-        arm_q = ik.solve(
-            self.chain, palm_goal, palm_rot, IK_SEED, iterations=self.config.ik_iterations
-        )
-        fingers = p.ref_angles[demo, start]
-        fingers = fingers + self.config.start_joint_noise * jax.random.normal(k_joint, (20,))
+        def start_pose(step: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+            """The actor's demonstrated palm pose and finger angles at ``step``, with the
+            episode's (fixed) start noise."""
+            palm_goal = to_world(p.ref_palm_pos[demo, step]) + position_noise
+            palm_rot = target_rot @ p.ref_palm_rot[demo, step]
+            return palm_goal, palm_rot, p.ref_angles[demo, step] + joint_noise
 
-        qpos = jnp.zeros(self.mj_model.nq)
-        qpos = qpos.at[self.chain.qpos_adr].set(arm_q)
-        qpos = qpos.at[self.hand_qadr[2:]].set(fingers[2:])  # wrist comes from the IK
-        qpos = qpos.at[self.coupled[:, 0]].set(qpos[self.coupled[:, 1]] * sh.DISTAL_COUPLING)
-        qpos = jnp.clip(qpos, self.jnt_lo, self.jnt_hi)
-
+        position_noise = self.config.start_position_noise * jax.random.normal(k_pos, (3,))
+        joint_noise = self.config.start_joint_noise * jax.random.normal(k_joint, (20,))
         data = mjx.make_data(self.mjx_model)
-        mocap_pos = data.mocap_pos.at[self.target_mocap].set(link_pos)
-        mocap_quat = data.mocap_quat.at[self.target_mocap].set(link_quat)
         data = data.replace(
-            qpos=qpos, ctrl=qpos[self.actuated_qadr], mocap_pos=mocap_pos, mocap_quat=mocap_quat
+            mocap_pos=data.mocap_pos.at[self.target_mocap].set(link_pos),
+            mocap_quat=data.mocap_quat.at[self.target_mocap].set(link_quat),
         )
-        data = mjx.forward(self.mjx_model, data)
+        start, data = self._separated_start(data, start, start_pose)
 
         episode = EpisodeInfo(
             rng=rng,
@@ -320,6 +323,68 @@ class HandInteractionEnv(Env):
             metrics=metrics,
             info={"episode": episode, "truncation": zero, "success": zero},
         )
+
+    def _start_qpos(
+        self, palm_goal: jax.Array, palm_rot: jax.Array, fingers: jax.Array
+    ) -> jax.Array:
+        """Joint positions (nq,) that put the palm centre at ``palm_goal`` (3,) with
+        orientation ``palm_rot`` (3, 3) by IK, and the fingers at ``fingers`` (20,)."""
+        arm_q = ik.solve(
+            self.chain, palm_goal, palm_rot, IK_SEED, iterations=self.config.ik_iterations
+        )
+        qpos = jnp.zeros(self.mj_model.nq)
+        qpos = qpos.at[self.chain.qpos_adr].set(arm_q)
+        qpos = qpos.at[self.hand_qadr[2:]].set(fingers[2:])  # wrist comes from the IK
+        qpos = qpos.at[self.coupled[:, 0]].set(qpos[self.coupled[:, 1]] * sh.DISTAL_COUPLING)
+        return jnp.clip(qpos, self.jnt_lo, self.jnt_hi)
+
+    def _separated_start(
+        self,
+        data: mjx.Data,
+        start: jax.Array,
+        start_pose: Callable[[jax.Array], tuple[jax.Array, jax.Array, jax.Array]],
+    ) -> tuple[jax.Array, mjx.Data]:
+        """Forward the start pose, moving the start earlier in the demonstration while
+        the hands interpenetrate.
+
+        The demonstrated pose through the arm's IK (which misses by ~3 cm and ~25 deg:
+        the robot arm is not the human's) and the Shadow hand's geometry (not the
+        human's) can put the agent's fingers centimetres into the target hand, most
+        often in the last few tenths of a second before the demonstrated contact
+        (about 40 % of starts on the recordings). The solver would then spring the hands
+        apart in the first steps, and MJX's box collisions resolve such depths otherwise
+        than native MuJoCo. Rigid retreats do not help: the hands interlock. The
+        demonstration itself does: earlier, the actor's hand was farther out. While the
+        deepest agent-target penetration exceeds ``start_max_penetration``, the start
+        moves ``start_backoff_steps`` control steps earlier (not before step 1), at most
+        ``start_retreats`` times; starts without penetration stay as drawn.
+
+        Args:
+          data: Data with the target hand's mocap poses set.
+          start: () drawn start step t_s.
+          start_pose: step -> (palm goal (3,), palm rotation (3, 3), finger angles (20,)).
+        Returns:
+          the start step used and ``data`` after ``mjx.forward`` at its pose.
+        """
+        cfg = self.config
+
+        def attempt(carry):
+            step, _, _, tries = carry
+            step = jnp.where(tries > 0, jnp.maximum(step - cfg.start_backoff_steps, 1), step)
+            qpos = self._start_qpos(*start_pose(step))
+            d = mjx.forward(self.mjx_model, data.replace(qpos=qpos, ctrl=qpos[self.actuated_qadr]))
+            depth = jnp.maximum(-jnp.min(d._impl.contact.dist), 0.0)
+            return step, d, depth, tries + 1
+
+        def penetrating(carry):
+            step, _, depth, tries = carry
+            retry = (tries <= cfg.start_retreats) & ((tries == 0) | (step > 1))
+            return (depth > cfg.start_max_penetration) & retry
+
+        # One traced forward pass serves the drawn start and every retreat.
+        first = (start, data, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
+        step, data, _, _ = jax.lax.while_loop(penetrating, attempt, first)
+        return step, data
 
     def physics(
         self, data: mjx.Data, action: jax.Array, model: mjx.Model | None = None

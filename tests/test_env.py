@@ -63,6 +63,48 @@ def test_reset_randomises_what_it_should(handshake_env, reset_state):
     assert not np.allclose(np.asarray(other.info["episode"].target_pos), target)
 
 
+def _native_deepest_penetration(model, qpos, mocap_pos, mocap_quat) -> float:
+    """Deepest agent-target penetration (m, >= 0) by native MuJoCo (float64, no cap)."""
+    d = mujoco.MjData(model)
+    d.qpos[:], d.mocap_pos[:], d.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+    mujoco.mj_forward(model, d)
+    return max([-c.dist for c in d.contact[: d.ncon]] + [0.0])
+
+
+def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
+    handshake_env, reset_state
+):
+    env, _, _ = handshake_env
+    single = env.unwrapped
+    cfg, p = single.config, single.params
+    data, ep = reset_state.pipeline_state, reset_state.info["episode"]
+    # Independent check of every start: native MuJoCo finds the hands apart.
+    poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
+    depth = np.array([
+        _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
+        for i in range(env.num_envs)
+    ])
+    assert depth.max() < cfg.start_max_penetration + 5e-4, depth.max()
+    # The start each env drew (reset's own draw, redone here): starts that penetrated
+    # moved earlier by whole back-offs or to step 1; the rest stayed as drawn.
+    def drawn_start(key):
+        _, k_demo, k_start = jax.random.split(key, 8)[:3]
+        t_min = p.t_min_step[jax.random.randint(k_demo, (), 0, p.t_min_step.shape[0])]
+        latest = jnp.maximum(t_min - cfg.start_offset_steps, 1)
+        return jax.random.randint(k_start, (), 1, latest + 1)
+
+    keys = jax.random.split(jax.random.PRNGKey(42), env.num_envs)
+    drawn = np.asarray(jax.vmap(drawn_start)(keys))
+    start = np.asarray(ep.start_step)
+    moved = start != drawn
+    assert np.all(start <= drawn)
+    # Synthetic handshake demos: ~1 start in 3 interpenetrates as drawn.
+    assert moved.sum() >= 4, moved.sum()
+    back = drawn[moved] - start[moved]
+    assert np.all((back % cfg.start_backoff_steps == 0) | (start[moved] == 1))
+    assert np.all(back <= cfg.start_retreats * cfg.start_backoff_steps)
+
+
 def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_state):
     env, _, step = handshake_env
     length = env.unwrapped.episode_length
