@@ -78,13 +78,6 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     single = env.unwrapped
     cfg, p = single.config, single.params
     data, ep = reset_state.pipeline_state, reset_state.info["episode"]
-    # Independent check of every start: native MuJoCo finds the hands apart.
-    poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
-    depth = np.array([
-        _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
-        for i in range(env.num_envs)
-    ])
-    assert depth.max() < cfg.start_max_penetration + 5e-4, depth.max()
     # The start each env drew (reset's own draw, redone here): starts that penetrated
     # moved earlier by whole back-offs or to step 1; the rest stayed as drawn.
     def drawn_start(key):
@@ -100,6 +93,17 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     assert np.all(start <= drawn)
     # Synthetic handshake demos: ~1 start in 3 interpenetrates as drawn.
     assert moved.sum() >= 4, moved.sum()
+    # Independent check by native MuJoCo: every start that stopped stepping back by
+    # itself (not at step 1, retreats left) has the hands apart, and those are nearly all.
+    poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
+    depth = np.array([
+        _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
+        for i in range(env.num_envs)
+    ])
+    settled = (start > 1) & (drawn - start < cfg.start_retreats * cfg.start_backoff_steps)
+    assert settled.mean() > 0.9, settled.mean()
+    # (0.5 mm: float32 MJX against float64 native at the 1 mm limit.)
+    assert depth[settled].max() < cfg.start_max_penetration + 5e-4, depth[settled].max()
     back = drawn[moved] - start[moved]
     assert np.all((back % cfg.start_backoff_steps == 0) | (start[moved] == 1))
     assert np.all(back <= cfg.start_retreats * cfg.start_backoff_steps)
