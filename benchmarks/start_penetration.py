@@ -33,7 +33,7 @@ def native_depths(model: mujoco.MjModel, data) -> np.ndarray:
     poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
     d = mujoco.MjData(model)
     depths = []
-    for qpos, mocap_pos, mocap_quat in zip(*poses):
+    for qpos, mocap_pos, mocap_quat in zip(*poses, strict=True):
         d.qpos[:], d.mocap_pos[:], d.mocap_quat[:] = qpos, mocap_pos, mocap_quat
         mujoco.mj_forward(model, d)
         depths.append(max([-c.dist for c in d.contact[: d.ncon]] + [0.0]))
