@@ -1,5 +1,6 @@
 """How often episode starts put the two hands into each other, with and without the
-step back along the demonstration (``EnvConfig.start_retreats``).
+retreats of ``EnvConfig.start_retreats`` (earlier along the demonstration, then
+farther out along the palm line).
 
 For each task and demonstration source it draws a batch of episode starts with the
 environment's own jitted reset and checks every start with native MuJoCo (float64,
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> dict:
         "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
         "start_max_penetration_m": env_lib.EnvConfig().start_max_penetration,
         "start_backoff_steps": env_lib.EnvConfig().start_backoff_steps,
+        "start_backoff_distance_m": env_lib.EnvConfig().start_backoff_distance,
         "results": [],
     }
     for task in args.tasks.split(","):

@@ -17,8 +17,9 @@ Episode randomisation (the paper's training method):
   kinematics of the arm and wrist, the fingers at the actor's angles (plus noise),
   and the imitation reference runs from there. A start whose hands interpenetrate
   (robot arm and Shadow hand are not the human's: IK misses, fingers overlap) moves
-  earlier along the same demonstration until they are apart, it reaches step 1 or
-  it has stepped back ``start_retreats`` times (``_separated_start``).
+  earlier along the same demonstration until they are apart; at step 1 the palm
+  backs away from the target's along the line between the palm centres instead, at
+  most ``start_retreats`` moves in all (``_separated_start``).
 
 Observation (``observation_size`` = 145), in this order:
 
@@ -135,6 +136,9 @@ class EnvConfig:
     starts earlier in the demonstration (see ``HandInteractionEnv._separated_start``)."""
     start_backoff_steps: int = 5
     """Control steps each retreat moves the start earlier."""
+    start_backoff_distance: float = 0.02
+    """Metres each retreat at the demonstration's first step moves the palm away from
+    the target's, along the line between the palm centres (0: stop at step 1)."""
     start_retreats: int = 8
     """Most retreats per start; 0 keeps every drawn start as it is (the paper's)."""
     ik_iterations: int = 30
@@ -284,10 +288,15 @@ class HandInteractionEnv(Env):
             target_points, target_frames, p.j_min[demo], p.goal_offsets[demo]
         )
 
-        def start_pose(step: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        def start_pose(
+            step: jax.Array, backoff: jax.Array
+        ) -> tuple[jax.Array, jax.Array, jax.Array]:
             """The actor's demonstrated palm pose and finger angles at ``step``, with the
-            episode's (fixed) start noise."""
+            episode's (fixed) start noise, the palm moved ``backoff`` metres farther
+            from the target palm along the line between the two."""
             palm_goal = to_world(p.ref_palm_pos[demo, step]) + position_noise
+            away = palm_goal - target_points[0]
+            palm_goal = palm_goal + backoff * away / jnp.maximum(jnp.linalg.norm(away), 1e-6)
             palm_rot = target_rot @ p.ref_palm_rot[demo, step]
             return palm_goal, palm_rot, p.ref_angles[demo, step] + joint_noise
 
@@ -343,10 +352,10 @@ class HandInteractionEnv(Env):
         self,
         data: mjx.Data,
         start: jax.Array,
-        start_pose: Callable[[jax.Array], tuple[jax.Array, jax.Array, jax.Array]],
+        start_pose: Callable[[jax.Array, jax.Array], tuple[jax.Array, jax.Array, jax.Array]],
     ) -> tuple[jax.Array, mjx.Data]:
-        """Forward the start pose, moving the start earlier in the demonstration while
-        the hands interpenetrate.
+        """Forward the start pose, moving the start earlier in the demonstration (and,
+        from its first step, farther out) while the hands interpenetrate.
 
         The demonstrated pose through the arm's IK (which misses by ~3 cm and ~25 deg:
         the robot arm is not the human's) and the Shadow hand's geometry (not the
@@ -354,37 +363,48 @@ class HandInteractionEnv(Env):
         often in the last few tenths of a second before the demonstrated contact (38 %
         of handshake starts on the synthetic demonstrations, 61 % on the recordings).
         The solver would then spring the hands apart in the first steps, and MJX's box
-        collisions resolve such depths otherwise than native MuJoCo. Rigid retreats do not help: the hands interlock. The
-        demonstration itself does: earlier, the actor's hand was farther out. While the
-        deepest agent-target penetration exceeds ``start_max_penetration``, the start
-        moves ``start_backoff_steps`` control steps earlier (not before step 1), at most
-        ``start_retreats`` times; starts without penetration stay as drawn.
+        collisions resolve such depths otherwise than native MuJoCo. The demonstration
+        itself is the first remedy: earlier, the actor's hand was farther out. While
+        the deepest agent-target penetration exceeds ``start_max_penetration``, the
+        start moves ``start_backoff_steps`` control steps earlier; once at step 1 (the
+        recorded claps begin 1-10 steps before contact, fingers already overlapping),
+        each further move backs the palm ``start_backoff_distance`` away from the
+        target's along the line between the palm centres -- for flat hands that
+        separates them, where interlocked handshake fingers would not be freed by it.
+        At most ``start_retreats`` moves; starts without penetration stay as drawn.
 
         Args:
           data: Data with the target hand's mocap poses set.
           start: () drawn start step t_s.
-          start_pose: step -> (palm goal (3,), palm rotation (3, 3), finger angles (20,)).
+          start_pose: (step, backoff metres) -> (palm goal (3,), palm rotation (3, 3),
+            finger angles (20,)).
         Returns:
           the start step used and ``data`` after ``mjx.forward`` at its pose.
         """
         cfg = self.config
 
         def attempt(carry):
-            step, _, _, tries = carry
-            step = jnp.where(tries > 0, jnp.maximum(step - cfg.start_backoff_steps, 1), step)
-            qpos = self._start_qpos(*start_pose(step))
+            step, backoff, _, _, tries = carry
+            at_first = step <= 1
+            retreat = tries > 0
+            backoff = jnp.where(retreat & at_first, backoff + cfg.start_backoff_distance, backoff)
+            earlier = jnp.maximum(step - cfg.start_backoff_steps, 1)
+            step = jnp.where(retreat & ~at_first, earlier, step)
+            qpos = self._start_qpos(*start_pose(step, backoff))
             d = mjx.forward(self.mjx_model, data.replace(qpos=qpos, ctrl=qpos[self.actuated_qadr]))
             depth = jnp.maximum(-jnp.min(d._impl.contact.dist), 0.0)
-            return step, d, depth, tries + 1
+            return step, backoff, d, depth, tries + 1
 
         def penetrating(carry):
-            step, _, depth, tries = carry
-            retry = (tries <= cfg.start_retreats) & ((tries == 0) | (step > 1))
+            step, _, _, depth, tries = carry
+            can_move = (step > 1) | (cfg.start_backoff_distance > 0)
+            retry = (tries <= cfg.start_retreats) & ((tries == 0) | can_move)
             return (depth > cfg.start_max_penetration) & retry
 
         # One traced forward pass serves the drawn start and every retreat.
-        first = (start, data, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
-        step, data, _, _ = jax.lax.while_loop(penetrating, attempt, first)
+        zero = jnp.zeros(())
+        first = (start, zero, data, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
+        step, _, data, _, _ = jax.lax.while_loop(penetrating, attempt, first)
         return step, data
 
     def physics(

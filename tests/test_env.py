@@ -93,20 +93,70 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     assert np.all(start <= drawn)
     # Synthetic handshake demos: ~1 start in 3 interpenetrates as drawn.
     assert moved.sum() >= 4, moved.sum()
-    # Independent check by native MuJoCo: every start that stopped stepping back by
-    # itself (not at step 1, retreats left) has the hands apart, and those are nearly all.
+    # Independent check by native MuJoCo: every start has the hands apart (those that
+    # reached step 1 still touching backed away along the palm line).
     poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
     depth = np.array([
         _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
         for i in range(env.num_envs)
     ])
-    settled = (start > 1) & (drawn - start < cfg.start_retreats * cfg.start_backoff_steps)
-    assert settled.mean() > 0.9, settled.mean()
     # (0.5 mm: float32 MJX against float64 native at the 1 mm limit.)
-    assert depth[settled].max() < cfg.start_max_penetration + 5e-4, depth[settled].max()
+    assert depth.max() < cfg.start_max_penetration + 5e-4, depth.max()
     back = drawn[moved] - start[moved]
     assert np.all((back % cfg.start_backoff_steps == 0) | (start[moved] == 1))
     assert np.all(back <= cfg.start_retreats * cfg.start_backoff_steps)
+
+
+def test_a_start_at_the_first_step_backs_away_along_the_palm_line(handshake_env, reset_state):
+    """At the demonstration's first step there is nothing earlier: the palm backs away
+    from the target's by ``start_backoff_distance`` per retreat. Reference: the same
+    schedule walked in Python, each candidate judged by native MuJoCo."""
+    env, _, _ = handshake_env
+    single = env.unwrapped
+    cfg, p = single.config, single.params
+    data = _one(reset_state.pipeline_state)
+    ep = _one(reset_state.info["episode"])
+    # The pose of the demonstrated contact, given to the loop as if it were step 1.
+    demo, rot = int(ep.demo), np.asarray(ep.target_rot)
+    contact = int(p.t_min_step[demo])
+    base = np.asarray(ep.target_pos) + rot @ np.asarray(p.ref_palm_pos[demo, contact])
+    away = base - np.asarray(ep.target_points[0])
+    away /= np.linalg.norm(away)
+    palm_rot = jnp.asarray(rot @ np.asarray(p.ref_palm_rot[demo, contact]))
+    fingers = p.ref_angles[demo, contact]
+    start_qpos = jax.jit(single._start_qpos)
+    mocap = (np.asarray(data.mocap_pos), np.asarray(data.mocap_quat))
+
+    def native_depth(palm):
+        qpos = np.asarray(start_qpos(jnp.asarray(palm, jnp.float32), palm_rot, fingers))
+        return _native_deepest_penetration(single.mj_model, qpos, *mocap), qpos
+
+    # Push the palm into the target until the hands overlap by > 5 mm.
+    push = next(
+        (x for x in np.arange(0.0, 0.1, 0.01) if native_depth(base - x * away)[0] > 0.005),
+        None,
+    )
+    assert push is not None, "no push along the palm line makes the hands overlap"
+
+    def start_pose(step, backoff):
+        del step  # the retreat must not move the step: it is already 1
+        return jnp.asarray(base - push * away) + backoff * jnp.asarray(away), palm_rot, fingers
+
+    step, got = jax.jit(lambda d: single._separated_start(d, jnp.int32(1), start_pose))(data)
+    assert int(step) == 1
+    candidates = [
+        native_depth(base + (k * cfg.start_backoff_distance - push) * away)
+        for k in range(cfg.start_retreats + 1)
+    ]
+    apart = [k for k, (depth, _) in enumerate(candidates) if depth <= cfg.start_max_penetration]
+    assert apart and apart[0] > 0, [c[0] for c in candidates]
+    got_qpos = np.asarray(got.qpos)
+    chosen = [k for k, (_, q) in enumerate(candidates) if np.allclose(q, got_qpos, atol=1e-4)]
+    # The first retreat that separates the hands (or the next one, should float32 MJX
+    # see the previous within 0.5 mm of the limit as still touching).
+    assert chosen and chosen[0] in (apart[0], apart[0] + 1), (chosen, apart)
+    if chosen[0] != apart[0]:
+        assert candidates[apart[0]][0] > cfg.start_max_penetration - 5e-4
 
 
 def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_state):
