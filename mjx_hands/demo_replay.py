@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_hands import contact_profile, ik, shadow_hand
 from mjx_hands import env as env_lib
-from mjx_hands import ik, shadow_hand
 from mjx_hands.env import HandInteractionEnv
 
 
@@ -60,34 +60,21 @@ def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
         lambda state: jax.vmap(env.step)(state, jax.vmap(lambda s: follower_action(env, s))(state))
     )
     state = reset(jax.random.split(rng, num_episodes))
-    required = np.asarray(env.params.required_contacts[0])
-    touched = np.zeros((num_episodes, len(shadow_hand.CONTACT_SENSORS)), bool)
-    most_required = np.zeros(num_episodes, int)
-    success = np.zeros(num_episodes, bool)
-    episode_return = np.zeros(num_episodes)
+    contacts, episode_return = [], np.zeros(num_episodes)
     for _ in range(env.episode_length):
         state = step(state)
         # The env logs each sensor's reading (contact/<sensor>) with every step.
-        c = np.stack([state.metrics[f"contact/{n}"] for n in shadow_hand.CONTACT_SENSORS], -1)
-        c = c > 0.5
-        touched |= c
-        most_required = np.maximum(most_required, c[:, required].sum(-1))
-        success |= np.asarray(state.info["success"]) > 0.5
+        contacts.append(
+            np.stack([state.metrics[f"contact/{n}"] for n in shadow_hand.CONTACT_SENSORS], -1)
+        )
         episode_return += np.asarray(state.reward)
+    profile = contact_profile.summarize(np.stack(contacts), env.params.required_contacts[0])
     return {
         "task": env.config.task,
         "demonstrations": env.demos[0].source,
         "episodes": num_episodes,
-        "success": float(success.mean()),
         "mean_return": float(episode_return.mean()),
-        "touched": {
-            name: float(touched[:, i].mean()) for i, name in enumerate(shadow_hand.CONTACT_SENSORS)
-        },
-        "required": [n for n, r in zip(shadow_hand.CONTACT_SENSORS, required, strict=True) if r],
-        "episodes_by_required_at_once": np.bincount(
-            most_required, minlength=int(required.sum()) + 1
-        ).tolist(),
-    }
+    } | profile
 
 
 def main(argv: list[str] | None = None) -> dict:

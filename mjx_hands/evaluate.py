@@ -4,9 +4,11 @@
 
 Reloads the latest (or ``--step``) checkpoint of a ``train.py`` run, runs the
 deterministic policy for ``--episodes`` randomised episodes and reports the success
-rate (all required contacts touched at some step; and at the last step) and the mean
-return, writes them to ``RUN_DIR/eval.json``, and renders ``RUN_DIR/eval.mp4`` of a
-few episodes with MuJoCo's renderer (``MUJOCO_GL=egl`` renders without a display).
+rate (all required contacts touched at some step; and at the last step), the mean
+return and the contact profile (which sensors touched, when; plotted to
+``RUN_DIR/contact_profile.png``), writes them to ``RUN_DIR/eval.json``, and renders
+``RUN_DIR/eval.mp4`` of the first few of those episodes with MuJoCo's renderer
+(``MUJOCO_GL=egl`` renders without a display).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, training
+from mjx_hands import checkpoint, contact_profile, shadow_hand, training
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,24 +88,49 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
 def rollout(single, policy, num_episodes: int, rng: jax.Array) -> dict[str, np.ndarray]:
     """Run ``num_episodes`` whole episodes of ``single`` (no restarts) under ``policy``.
 
-    Returns reward (T, n) and success (T, n), T the episode length, and for MuJoCo
-    environments qpos (T+1, n, nq), mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4).
+    Returns reward (T, n) and success (T, n), T the episode length; for the hand
+    environments also contacts (T, n, 15), the sensor readings, and qpos (T+1, n, nq),
+    mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering.
     """
     reset = jax.jit(jax.vmap(single.reset))
     step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
     state = reset(jax.random.split(rng, num_episodes))
-    frames, rewards, successes = [state.pipeline_state], [], []
+    physics = hasattr(state.pipeline_state, "qpos")  # the point-reach test task has none
+    sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
+    has_contacts = all(k in state.metrics for k in sensors)
+    keys = ("reward", "success", "contacts", "qpos", "mocap_pos", "mocap_quat")
+    record = {key: [] for key in keys}
+
+    def keep_pose(data):  # host copies only: whole mjx.Data per step would pile up on device
+        if physics:
+            for key in ("qpos", "mocap_pos", "mocap_quat"):
+                record[key].append(np.asarray(getattr(data, key)))
+
+    keep_pose(state.pipeline_state)
     for _ in range(single.episode_length):
         state = step(state)
-        frames.append(state.pipeline_state)
-        rewards.append(state.reward)
-        successes.append(state.info["success"])
-    stack = lambda xs: np.stack([np.asarray(x) for x in xs])
-    result = {"reward": stack(rewards), "success": stack(successes)}
-    if hasattr(frames[0], "qpos"):  # MuJoCo physics (the point-reach test task has none)
-        for key in ("qpos", "mocap_pos", "mocap_quat"):
-            result[key] = stack([getattr(d, key) for d in frames])
-    return result
+        keep_pose(state.pipeline_state)
+        record["reward"].append(np.asarray(state.reward))
+        record["success"].append(np.asarray(state.info["success"]))
+        if has_contacts:
+            record["contacts"].append(np.stack([np.asarray(state.metrics[k]) for k in sensors], -1))
+    return {key: np.stack(values) for key, values in record.items() if values}
+
+
+def summarize(single, trajectory: dict[str, np.ndarray]) -> tuple[dict, dict | None]:
+    """(metrics, contact profile or None) of a :func:`rollout`: the training's evaluation
+    metrics (success at some step and at the last step, mean return) and, for the hand
+    environments, :func:`contact_profile.summarize` of the sensor readings."""
+    success = trajectory["success"] > 0.5
+    metrics = {
+        "eval/episode_return": float(trajectory["reward"].sum(0).mean()),
+        "eval/success": float(success.any(0).mean()),
+        "eval/success_final": float(success[-1].mean()),
+    }
+    if "contacts" not in trajectory:
+        return metrics, None
+    required = np.asarray(single.params.required_contacts[0])
+    return metrics, contact_profile.summarize(trajectory["contacts"], required)
 
 
 def render_video(single, trajectory, path: Path, camera: str, width: int, height: int, fps: float):
@@ -142,28 +169,44 @@ def main(argv: list[str] | None = None) -> int:
     args = tyro.cli(EvalArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
     run_dir = Path(args.run_dir)
     try:
+        if not 0 <= args.video_episodes <= args.episodes:
+            raise ValueError(
+                f"--video-episodes {args.video_episodes} must be between 0 and --episodes "
+                f"{args.episodes}: the video shows the first of the evaluated episodes"
+            )
         algo, learner, config, single = load_policy(run_dir, args.step, args.episodes)
         _check_video_size(single.mj_model, args)
     except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    replicated = jax.tree.map(lambda x: np.broadcast_to(x, (algo.num_devices,) + x.shape), learner)
-    metrics = algo.evaluate_learner(replicated, jax.random.PRNGKey(args.seed))
+    def policy(obs):
+        return algo.policy(learner, obs)
+
+    trajectory = rollout(single, policy, args.episodes, jax.random.PRNGKey(args.seed))
+    metrics, profile = summarize(single, trajectory)
     summary = {"run_dir": str(run_dir), "task": config.task, "episodes": args.episodes} | metrics
+    if profile is not None:
+        summary["contact_profile"] = profile
+        plot_path = run_dir / "contact_profile.png"
+        contact_profile.plot(
+            trajectory["contacts"], profile, plot_path, config.task, single.config.control_dt
+        )
     (run_dir / "eval.json").write_text(json.dumps(summary, indent=2))
     print(
         f"{config.task}: success {metrics['eval/success']:.3f} (at the end "
         f"{metrics['eval/success_final']:.3f}), mean return {metrics['eval/episode_return']:.2f} "
         f"over {args.episodes} episodes"
     )
+    if profile is not None:
+        touched = ", ".join(f"{n} {profile['touched'][n]:.2f}" for n in profile["required"])
+        print(f"required sensors touched (share of episodes): {touched}; plot: {plot_path}")
     if args.video_episodes > 0:
-        policy = lambda obs: algo.policy(learner, obs)
-        trajectory = rollout(single, policy, args.video_episodes, jax.random.PRNGKey(args.seed + 1))
+        shown = {k: v[:, : args.video_episodes] for k, v in trajectory.items()}
         video = Path(args.video or run_dir / "eval.mp4")
         try:
             render_video(
                 single,
-                trajectory,
+                shown,
                 video,
                 args.camera,
                 args.width,

@@ -322,6 +322,33 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
     assert np.isfinite(summary["eval/episode_return"])
     video = (run_dir / "eval.mp4").read_bytes()
     assert video[4:8] == b"ftyp" and len(video) > 5000
+    # The contact profile, from the sensor readings, agrees with the env's success flag.
+    profile = summary["contact_profile"]
+    assert profile["required"] == ["ff_middle", "mf_middle", "rf_middle"]
+    assert profile["success"] == summary["eval/success"]
+    assert sum(profile["episodes_by_required_at_once"]) == 8
+    assert len(profile["all_required_over_time"]) == 100
+    assert (run_dir / "contact_profile.png").stat().st_size > 5000
+
+
+def test_evaluate_refuses_more_video_episodes_than_evaluated_ones():
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mjx_hands.evaluate",
+            "/nonexistent/run",
+            "--episodes",
+            "4",
+            "--video-episodes",
+            "5",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 2 and "--video-episodes 5" in result.stderr, result.stderr
 
 
 def test_evaluate_names_a_missing_run():
