@@ -4,7 +4,10 @@
 # $OUT (default ./gpu_out): throughput JSON, logs, the run's metrics, config and plot.
 #
 #   BUDGET_S=560 bash benchmarks/gpu_session.sh
+#   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
 #
+# STAGES (default "throughput train") picks the stages and their order; training gets
+# whatever of BUDGET_S the stages before it left.
 # On a machine that has JAX (with CUDA) but not mujoco/mujoco-mjx/brax, put their
 # wheels in .whl/ first (see benchmarks/RESULTS.md, "Running on a GPU").
 set -u
@@ -13,13 +16,15 @@ BUDGET_S=${BUDGET_S:-560}
 THROUGHPUT_S=${THROUGHPUT_S:-200}
 mkdir -p "$OUT"
 WHEELS=${WHEELS:-.whl}
-if compgen -G "$WHEELS/*.whl" >/dev/null; then
+STAGES=${STAGES:-throughput train}
+# A warm machine keeps /tmp/site from an earlier call: install once.
+if compgen -G "$WHEELS/*.whl" >/dev/null && [ ! -d /tmp/site/mujoco ]; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site "$WHEELS"/*.whl || exit 1
   # Package data carried without its package (e.g. only the Shadow hand assets).
   if [ -d "$WHEELS/site" ]; then cp -r "$WHEELS"/site/* /tmp/site/; fi
-  export PYTHONPATH=/tmp/site
 fi
+if [ -d /tmp/site/mujoco ]; then export PYTHONPATH=/tmp/site; fi
 # No rendering here; EGL may be absent, and mujoco only tolerates an ImportError from it.
 export PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 export XLA_FLAGS="${XLA_FLAGS:-} --xla_gpu_triton_gemm_any=true"
@@ -30,21 +35,33 @@ export XLA_FLAGS="${XLA_FLAGS:-} --xla_gpu_triton_gemm_any=true"
   python3 -c 'import sys, jax, mujoco, flax, optax, orbax.checkpoint as o
 print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__,
       "flax", flax.__version__, "optax", optax.__version__, "orbax", o.__version__)
-print(jax.devices())'
+import os, mjx_hands  # mjx_hands adds its CPU code-generation flag where jaxlib knows it
+print(jax.devices(), "XLA_FLAGS:", os.environ.get("XLA_FLAGS"))'
 } 2>&1 | tee "$OUT/session.log"
 
-echo "== throughput sweep (at most ${THROUGHPUT_S} s)" | tee -a "$OUT/session.log"
-timeout "$THROUGHPUT_S" python3 -m benchmarks.throughput \
-  --batch-sizes "${BATCHES:-256,4096,16384}" --env-step-batches "${ENV_STEP_BATCHES:-4096}" \
-  --control-steps "${CONTROL_STEPS:-20}" --out "$OUT/results_gpu.json" 2>&1 | tee "$OUT/throughput.log"
+throughput() {
+  echo "== throughput sweep (at most ${THROUGHPUT_S} s)" | tee -a "$OUT/session.log"
+  timeout "$THROUGHPUT_S" python3 -m benchmarks.throughput \
+    --batch-sizes "${BATCHES:-256,4096,16384}" --env-step-batches "${ENV_STEP_BATCHES:-4096}" \
+    --control-steps "${CONTROL_STEPS:-20}" --out "$OUT/results_gpu.json" 2>&1 | tee "$OUT/throughput.log"
+}
 
-# Training gets what is left; train.py's --max-minutes counts from after its init
-# compile, so keep a minute back for that and the final evaluation.
-left=$((BUDGET_S - SECONDS))
-minutes=$(python3 -c "print(max(0.5, ($left - 90) / 60))")
-echo "== training: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
-rm -rf /tmp/gpu_run
-timeout -s INT "$((left - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
-  --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} 2>&1 | tee "$OUT/train.log"
-for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
+train() {
+  # Training gets what is left; train.py's --max-minutes counts from after its init
+  # compile, so keep a minute back for that and the final evaluation.
+  left=$((BUDGET_S - SECONDS))
+  minutes=$(python3 -c "print(max(0.5, ($left - 90) / 60))")
+  echo "== training: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+  rm -rf /tmp/gpu_run
+  timeout -s INT "$((left - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
+    --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} 2>&1 | tee "$OUT/train.log"
+  for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
+}
+
+for stage in $STAGES; do
+  case $stage in
+    throughput|train) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput or train" >&2; exit 2 ;;
+  esac
+done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"
