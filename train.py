@@ -71,7 +71,10 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"done ({summary['stop_reason']}): {summary['epochs']} epochs, "
         f"eval success {final.get('eval/success', float('nan')):.2f}, "
-        f"best {summary['best_eval_success']:.2f}; results in {summary['run_dir']}"
+        f"best {summary['best_eval_success']:.2f}"
+        + (f" (epoch {summary['best_checkpoint']}, policy in best/)"
+           if summary.get("best_checkpoint") is not None else "")
+        + f"; results in {summary['run_dir']}"
     )
     return 0
 

@@ -34,8 +34,11 @@ def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
-def save(directory: Path, step: int, state, metadata: dict[str, Any]) -> None:
-    """Write ``state`` (any pytree of arrays) and ``metadata`` (JSON-able) as ``step``."""
+def save(
+    directory: Path, step: int, state, metadata: dict[str, Any], max_to_keep: int = 3
+) -> None:
+    """Write ``state`` (any pytree of arrays) and ``metadata`` (JSON-able) as ``step``;
+    the oldest steps beyond ``max_to_keep`` are deleted once it is complete."""
     paths, leaves, _ = _leaves(jax.device_get(state))
     record = dict(metadata)
     record["leaves"] = [
@@ -43,7 +46,7 @@ def save(directory: Path, step: int, state, metadata: dict[str, Any]) -> None:
     ]
     # Orbax refuses empty arrays (MJX data has some); their shape in the record suffices.
     arrays = {f"leaf_{i:05d}": x for i, x in enumerate(leaves) if x.size}
-    with _manager(directory, create=True) as manager:
+    with _manager(directory, max_to_keep, create=True) as manager:
         manager.save(
             step,
             args=ocp.args.Composite(

@@ -2,7 +2,8 @@
 
     python -m mjx_hands.evaluate RUN_DIR [--episodes 128] [--video-episodes 3]
 
-Reloads the latest (or ``--step``) checkpoint of a ``train.py`` run, runs the
+Reloads the latest (or ``--step``, or with ``--best`` the best-evaluated) checkpoint
+of a ``train.py`` run, runs the
 deterministic policy for ``--episodes`` randomised episodes and reports the success
 rate (all required contacts touched at some step; and at the last step), the mean
 return and the contact profile (which sensors touched, when; plotted to
@@ -37,6 +38,9 @@ class EvalArgs:
     """Evaluation episodes (one batch)."""
     step: int | None = None
     """Checkpoint epoch to load; default the latest."""
+    best: bool = False
+    """Load the policy of the run's best evaluation during training (RUN_DIR/best)
+    instead of the latest checkpoint."""
     seed: int = 12345
     """Seed of the evaluation episodes' randomisation."""
     video_episodes: int = 3
@@ -51,13 +55,21 @@ class EvalArgs:
     """Video height in pixels."""
 
 
-def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = None):
+def restore_run(
+    run_dir: Path, step: int | None = None, eval_envs: int | None = None, best: bool = False
+):
     """(algo, checkpoint tree, config, single env) of a run's checkpoint; nothing compiled.
 
     The tree is what training saved: ``learner``, ``env_state`` (leaves with a leading
-    device axis), ... ``eval_envs`` overrides the run's evaluation batch.
+    device axis), ...; with ``best``, the best evaluation's ``learner`` only.
+    ``eval_envs`` overrides the run's evaluation batch.
     """
-    ckpt_dir = Path(run_dir) / "checkpoints"
+    ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
+    if best and not ckpt_dir.is_dir():
+        raise checkpoint.CheckpointError(
+            f"{run_dir} has no best policy ({ckpt_dir} missing): it was trained before "
+            "train.py kept one, or it never evaluated; evaluate the latest checkpoint instead"
+        )
     meta = checkpoint.read_metadata(ckpt_dir, step)
     config = training.config_from_json(meta["config"])
     config = dataclasses.replace(config, resume=False)
@@ -73,16 +85,22 @@ def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = 
         )
     algo, single = training.make_learner(config, devices=devices)
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
-    tree, _ = checkpoint.restore(
-        ckpt_dir, training._checkpoint_tree(like, config.save_replay), step
-    )
+    if meta.get("contents") == "policy":
+        like_tree = training._policy_tree(like)
+    else:
+        like_tree = training._checkpoint_tree(like, config.save_replay)
+    tree, _ = checkpoint.restore(ckpt_dir, like_tree, step)
     return algo, tree, config, single
 
 
-def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128):
-    """(algo, unreplicated learner, config, single env) of a run's checkpoint."""
-    algo, tree, config, single = restore_run(run_dir, step, eval_envs)
-    return algo, tree["learner"], config, single
+def load_policy(
+    run_dir: Path, step: int | None = None, eval_envs: int = 128, best: bool = False
+):
+    """(algo, unreplicated learner, config, single env, epoch) of a run's checkpoint."""
+    algo, tree, config, single = restore_run(run_dir, step, eval_envs, best)
+    ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
+    epoch = int(checkpoint.read_metadata(ckpt_dir, step)["epoch"])
+    return algo, tree["learner"], config, single, epoch
 
 
 def rollout(single, policy, num_episodes: int, rng: jax.Array) -> dict[str, np.ndarray]:
@@ -174,7 +192,11 @@ def main(argv: list[str] | None = None) -> int:
                 f"--video-episodes {args.video_episodes} must be between 0 and --episodes "
                 f"{args.episodes}: the video shows the first of the evaluated episodes"
             )
-        algo, learner, config, single = load_policy(run_dir, args.step, args.episodes)
+        if args.best and args.step is not None:
+            raise ValueError("--best and --step both pick the checkpoint; give one of them")
+        algo, learner, config, single, epoch = load_policy(
+            run_dir, args.step, args.episodes, args.best
+        )
         _check_video_size(single.mj_model, args)
     except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
@@ -184,7 +206,13 @@ def main(argv: list[str] | None = None) -> int:
 
     trajectory = rollout(single, policy, args.episodes, jax.random.PRNGKey(args.seed))
     metrics, profile = summarize(single, trajectory)
-    summary = {"run_dir": str(run_dir), "task": config.task, "episodes": args.episodes} | metrics
+    summary = {
+        "run_dir": str(run_dir),
+        "task": config.task,
+        "checkpoint": {"kind": "best" if args.best else "latest" if args.step is None else "step",
+                       "epoch": epoch},
+        "episodes": args.episodes,
+    } | metrics
     if profile is not None:
         summary["contact_profile"] = profile
         plot_path = run_dir / "contact_profile.png"
@@ -195,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{config.task}: success {metrics['eval/success']:.3f} (at the end "
         f"{metrics['eval/success_final']:.3f}), mean return {metrics['eval/episode_return']:.2f} "
-        f"over {args.episodes} episodes"
+        f"over {args.episodes} episodes ({summary['checkpoint']['kind']} checkpoint, epoch {epoch})"
     )
     if profile is not None:
         touched = ", ".join(f"{n} {profile['touched'][n]:.2f}" for n in profile["required"])

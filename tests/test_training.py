@@ -7,6 +7,7 @@ hand environment with a tiny budget.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import io
 import json
@@ -89,6 +90,10 @@ def test_resume_equals_an_uninterrupted_run(tmp_path):
         np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
     np.testing.assert_array_equal(a["buffer"].data.obs, b["buffer"].data.obs)
 
+    # The best policy is chosen over the resumed run's whole history, as uninterrupted.
+    assert resumed["best_checkpoint"] == full["best_checkpoint"]
+    assert checkpoint.latest_step(tmp_path / "split" / "best") == full["best_checkpoint"]
+
     rows = (tmp_path / "split" / "metrics.csv").read_text().splitlines()
     assert len(rows) == 1 + 4  # header + one row per epoch, none repeated by the resume
     full_rows = (tmp_path / "full" / "metrics.csv").read_text().splitlines()
@@ -111,6 +116,28 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
     assert checkpoint.latest_step(run_dir / "checkpoints") == 2
     png = (run_dir / "success.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
+    run_dir = tmp_path / "run"
+    summary = training.run(
+        _config(run_dir, epochs=6, eval_every=1), out=io.StringIO(), env_factory=point_factory
+    )
+    with open(run_dir / "metrics.csv") as f:
+        rows = [{k: float(v) for k, v in r.items() if v} for r in csv.DictReader(f)]
+    rank = ("eval/success", "eval/success_final", "eval/episode_return")
+    best_row = max(rows, key=lambda r: tuple(r[k] for k in rank))  # first of equals wins
+    epoch = int(best_row["epoch"])
+    assert summary["best_checkpoint"] == epoch
+    # One policy kept, the best one's, with its evaluation in the metadata.
+    assert sorted(p.name for p in (run_dir / "best").iterdir() if p.name.isdigit()) == [str(epoch)]
+    meta = checkpoint.read_metadata(run_dir / "best")
+    assert meta["contents"] == "policy" and meta["eval"]["eval/success"] == best_row["eval/success"]
+    algo, _ = training.make_learner(training.config_from_json(meta["config"]), env_factory=point_factory)
+    like = training._policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
+    tree, _ = checkpoint.restore(run_dir / "best", like)
+    assert set(tree) == {"learner"}  # no env state, no replay buffer
+    assert int(tree["learner"].updates) == best_row["train/updates"]
 
 
 def test_existing_run_is_not_overwritten_without_resume(tmp_path):
@@ -329,26 +356,43 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
     assert sum(profile["episodes_by_required_at_once"]) == 8
     assert len(profile["all_required_over_time"]) == 100
     assert (run_dir / "contact_profile.png").stat().st_size > 5000
+    assert summary["checkpoint"] == {"kind": "latest", "epoch": 2}
 
 
-def test_evaluate_refuses_more_video_episodes_than_evaluated_ones():
+def test_evaluate_loads_the_best_policy_without_compiling(hand_run):
+    from mjx_hands import evaluate
+
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    with open(run_dir / "metrics.csv") as f:
+        rows = [r for r in csv.DictReader(f)]
+    _, best, _, _, epoch = evaluate.load_policy(run_dir, best=True, eval_envs=8)
+    _, latest, _, _, _ = evaluate.load_policy(run_dir, eval_envs=8)
+    assert int(best.updates) == float(rows[epoch - 1]["train/updates"])
+    if epoch == 2:  # the best is the latest: the very same networks
+        for x, y in zip(jax.tree.leaves(best), jax.tree.leaves(latest)):
+            np.testing.assert_array_equal(x, y)
+    else:
+        assert int(best.updates) < int(latest.updates)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--episodes", "4", "--video-episodes", "5"], "--video-episodes 5"),
+        (["--best", "--step", "3"], "--best and --step"),
+        (["--best"], "no best policy"),
+    ],
+)
+def test_evaluate_refuses_bad_choices_with_a_message(args, message, tmp_path):
     result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "mjx_hands.evaluate",
-            "/nonexistent/run",
-            "--episodes",
-            "4",
-            "--video-episodes",
-            "5",
-        ],
+        [sys.executable, "-m", "mjx_hands.evaluate", str(tmp_path), *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,
     )
-    assert result.returncode == 2 and "--video-episodes 5" in result.stderr, result.stderr
+    assert result.returncode == 2 and message in result.stderr, result.stderr
 
 
 def test_evaluate_names_a_missing_run():
