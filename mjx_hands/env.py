@@ -95,6 +95,17 @@ def place_target(
     return np.asarray(contact_point) - rot @ actor_pos, rot
 
 
+def target_tilt(rng: jax.Array, noise: float, angle: float | None = None) -> jax.Array:
+    """Quaternion (4,) of the target hand's per-episode tilt: about a uniformly random
+    axis, by ``angle`` radians if given, else by a Gaussian angle of std ``noise``."""
+    k_axis, k_angle = jax.random.split(rng)
+    axis = jax.random.normal(k_axis, (3,))
+    axis = axis / jnp.linalg.norm(axis)
+    if angle is None:
+        angle = noise * jax.random.normal(k_angle, ())
+    return spatial.axis_angle_quat(axis, jnp.asarray(angle, jnp.float32))
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Everything that defines an environment instance (all static under jit)."""
@@ -123,6 +134,9 @@ class EnvConfig:
     """Std of the angle (radians) of a random rotation, about a uniformly random axis,
     applied to the target hand per episode (0: the task's nominal orientation; the
     paper's robustness experiments perturb it)."""
+    target_rotation_angle: float | None = None
+    """If set, every episode's target hand is turned by exactly this angle (radians)
+    about a uniformly random axis instead (robustness sweeps, ``mjx_hands.robustness``)."""
     start_offset_steps: int = 5
     """t_off: the latest start step is t_min - t_off (control steps)."""
     start_position_noise: float = 0.02
@@ -271,12 +285,9 @@ class HandInteractionEnv(Env):
         target_pos = self.target_center + jax.random.uniform(
             k_box, (3,), minval=-box, maxval=box
         )
-        # Orientation robustness: a rotation of Gaussian angle about a uniform random axis.
-        k_axis, k_angle = jax.random.split(k_rot)
-        axis = jax.random.normal(k_axis, (3,))
-        axis = axis / jnp.linalg.norm(axis)
-        angle = self.config.target_rotation_noise * jax.random.normal(k_angle, ())
-        tilt = spatial.axis_angle_quat(axis, angle)
+        tilt = target_tilt(
+            k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
+        )
         target_quat = spatial.quat_mul(tilt, self.target_quat)
         target_rot = spatial.quat_to_mat(tilt) @ self.target_rot
         to_world = lambda x: target_pos + x @ target_rot.T

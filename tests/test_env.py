@@ -305,15 +305,18 @@ def test_a_diverged_env_ends_its_episode_without_poisoning_the_batch(handshake_e
     assert int(state.info["episode"].step[3]) == 0
 
 
-def test_target_orientation_noise_rotates_the_whole_target_hand():
-    """Host-only: the tilted target's mocap links keep the hand's shape (rigid motion)."""
-    env = env_lib.make_env("et", mocap_source="synthetic", target_rotation_noise=0.5)
+def test_target_rotation_turns_the_whole_target_hand_by_the_angle_asked():
+    """Host-only: the tilted target's mocap links keep the hand's shape (rigid motion),
+    turned by exactly ``target_rotation_angle`` from the nominal pose."""
+    env = env_lib.make_env("et", mocap_source="synthetic", target_rotation_angle=0.5)
     state = jax.jit(env.reset)(jax.random.PRNGKey(3))
     ep = state.info["episode"]
     rot = np.asarray(ep.target_rot)
     nominal = np.asarray(env.target_rot)
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-5)
-    assert np.abs(rot - nominal).max() > 0.05  # tilted away from the nominal pose
+    turn = rot @ nominal.T
+    angle = np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))
+    assert angle == pytest.approx(0.5, abs=1e-4)
     # The mocap palm sits and turns where the tilted frame says it does.
     d = mujoco.MjData(env.mj_model)
     d.mocap_pos[:] = np.asarray(state.pipeline_state.mocap_pos)
@@ -350,3 +353,27 @@ def test_demonstration_follower_tracks_the_demonstrated_palm(handshake_env, rese
     # Measured: 7 cm against 13 cm. Set-points lag a fast human reach by a few control
     # steps, so the follower trails the demonstration; a wrong IK or sign would not gain.
     assert np.median(followed) < 0.7 * np.median(held), (np.median(followed), np.median(held))
+
+
+def test_target_tilt_angle_is_exact_or_gaussian_about_uniform_axes():
+    """NumPy reference: the quaternion's rotation angle is 2·atan2(|v|, |w|)."""
+    keys = jax.random.split(jax.random.PRNGKey(0), 4000)
+
+    def angles_and_axes(quats):
+        q = np.asarray(quats, np.float64)
+        vec = np.linalg.norm(q[:, 1:], axis=1)
+        return 2 * np.arctan2(vec, np.abs(q[:, 0])), q[:, 1:] * np.sign(q[:, :1]) / vec[:, None]
+
+    fixed = jax.jit(jax.vmap(lambda k: env_lib.target_tilt(k, 0.3, 0.7)))(keys)
+    angle, axis = angles_and_axes(fixed)
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(fixed), axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(angle, 0.7, atol=1e-5)  # the noise is ignored
+    assert np.abs(axis.mean(0)).max() < 0.05  # axes spread over the sphere
+
+    noisy = jax.jit(jax.vmap(lambda k: env_lib.target_tilt(k, 0.3)))(keys)
+    angle, _ = angles_and_axes(noisy)
+    # |N(0, σ)| has mean σ·sqrt(2/π) = 0.239 for σ = 0.3; its sample error here is ~0.003.
+    assert angle.mean() == pytest.approx(0.3 * np.sqrt(2 / np.pi), abs=0.012)
+    zero = jax.jit(jax.vmap(lambda k: env_lib.target_tilt(k, 0.0)))(keys[:8])
+    np.testing.assert_allclose(np.asarray(zero), np.tile([1.0, 0, 0, 0], (8, 1)), atol=1e-7)
+
