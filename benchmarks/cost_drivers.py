@@ -163,7 +163,7 @@ def compile_physics(env, model: mjx.Model, data: mjx.Data, action: jax.Array):
     """(compiled batched control period, compile seconds). The model is closed over,
     as in the environment: passed as an argument instead, XLA cannot fold the scene's
     constants and the step ran ~3x slower on CPU (254 against 753 physics steps/s)."""
-    step = jax.jit(jax.vmap(lambda d, a: env.physics(d, a, model)))
+    step = jax.jit(jax.vmap(lambda d, a: env.physics.step(d, env.ctrl_for(a), model)))
     t0 = time.perf_counter()
     compiled = step.lower(data, action).compile()
     return compiled, time.perf_counter() - t0
@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> dict:
         state_sets = {"training states": visited}
         batch = visited.qpos.shape[0]
     else:
-        env = env_lib.make_env(args.task, mocap_source="synthetic")
+        env = env_lib.make_env(args.task, mocap_source="synthetic", physics="mjx")
         state_sets, batch = {}, args.batch
     starts = env_lib.BatchedEnv(env, batch).reset(jax.random.PRNGKey(0)).pipeline_state
     state_sets = {"episode starts": starts} | state_sets

@@ -68,7 +68,7 @@ def time_compiled(fn, data, repeats: int) -> tuple[float, float, object]:
 
 def measure(env: env_lib.HandInteractionEnv, batch: int, repeats: int) -> dict:
     """Per-stage and whole-step milliseconds per batched call at ``batch`` envs."""
-    model = env.mjx_model
+    model = env.physics.mjx_model
     data = env_lib.BatchedEnv(env, batch).reset(jax.random.PRNGKey(0)).pipeline_state
     rows = []
     for name, fn in {"call overhead": _bump_time, **STAGES, "mjx.step (whole)": None}.items():
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> dict:
     )
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
-    env = env_lib.make_env("handshake", mocap_source="synthetic")
+    env = env_lib.make_env("handshake", mocap_source="synthetic", physics="mjx")
     report = {
         "machine": {
             "platform": platform.platform(),

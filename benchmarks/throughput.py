@@ -2,8 +2,11 @@
 
 Both run the same hand-pair model from the same randomised start states under the
 same random set-point sequence, so the report gives a ratio, not only absolute
-numbers. Compile time is measured apart from run time. The JSON is rewritten after
-every batch size, so a run cut short keeps what it measured.
+numbers: MJX physics, MJX env.step, the environment on its native physics
+(``physics="native"``: C MuJoCo called from the compiled env.step) and, as the
+ceiling of that, pure ``mujoco.rollout`` of the same steps. Compile time is measured
+apart from run time. The JSON is rewritten after every batch size, so a run cut
+short keeps what it measured.
 
     python -m benchmarks.throughput --batch-sizes 32,128 --out benchmarks/results_cpu.json
     python -m benchmarks.throughput --batch-sizes 256,4096,16384 --env-step-batches 4096
@@ -89,7 +92,7 @@ def measure_mjx(
     rng = np.random.default_rng(0)
     actions = jnp.asarray(rng.uniform(-1, 1, (control_steps, batch, env.action_size)), jnp.float32)
 
-    physics_batch = jax.jit(jax.vmap(env.physics))
+    physics_batch = jax.jit(jax.vmap(lambda d, a: env.physics.step(d, env.ctrl_for(a))))
     t0 = time.perf_counter()
     physics_c = physics_batch.lower(starts, actions[0]).compile()
     compile_s["physics"] = time.perf_counter() - t0
@@ -106,6 +109,7 @@ def measure_mjx(
         "finite": bool(np.all(np.isfinite(np.asarray(data.qpos)))),
     }
     if env_step:
+        result["_state"] = state
         t0 = time.perf_counter()
         step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
         result["compile_s"]["env_step"] = time.perf_counter() - t0
@@ -116,6 +120,31 @@ def measure_mjx(
     result["device_peak_bytes"] = device_peak_bytes()
     result["host_peak_rss_bytes"] = host_peak_rss_bytes()
     return result | {"_start": starts, "_actions": actions, "_qpos": np.asarray(final.qpos)}
+
+
+def measure_native_env(
+    env: env_lib.HandInteractionEnv, mjx_state, actions: jax.Array
+) -> dict:
+    """env.step control steps/s of the batch on native physics, from the MJX episodes
+    ``mjx_state`` (their physics state posed natively) under the same ``actions``."""
+    batch = actions.shape[1]
+    benv = env_lib.BatchedEnv(env, batch)
+    d = mjx_state.pipeline_state
+    t0 = time.perf_counter()
+    posed = jax.jit(jax.vmap(env.physics.pose))(d.qpos, d.mocap_pos, d.mocap_quat)
+    state = jax.block_until_ready(mjx_state.replace(pipeline_state=posed))
+    compile_s = {"pose": time.perf_counter() - t0}
+    t0 = time.perf_counter()
+    step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
+    compile_s["env_step"] = time.perf_counter() - t0
+    s, t_env = _time_loop(step_c, state, actions)
+    n = batch * actions.shape[0]
+    return {
+        "env_control_steps_per_s": n / t_env,
+        "env_physics_steps_per_s": n * env.n_substeps / t_env,
+        "compile_s": compile_s,
+        "finite": bool(np.all(np.isfinite(np.asarray(s.obs)))),
+    }
 
 
 def qpos_gaps(mjx_qpos: np.ndarray, native_qpos: np.ndarray) -> dict:
@@ -151,11 +180,25 @@ def measure_native(env: env_lib.HandInteractionEnv, data, actions, nthread: int)
     a = np.asarray(actions, np.float64)
     ctrl = env.ctrl_lo + 0.5 * (a + 1.0) * (env.ctrl_hi - env.ctrl_lo)  # (T, B, nu)
     ctrl = np.repeat(ctrl.transpose(1, 0, 2), env.n_substeps, axis=1)  # (B, T*sub, nu)
+    # The target hand's pose travels with the controls: the full-physics state has no
+    # mocap bodies, and a rollout without them would have nothing to touch.
+    mocap = np.concatenate(
+        [np.asarray(data.mocap_pos).reshape(batch, -1), np.asarray(data.mocap_quat).reshape(batch, -1)],
+        axis=1,
+    )
+    control = np.concatenate(
+        [ctrl, np.broadcast_to(mocap[:, None], (batch, ctrl.shape[1], mocap.shape[1]))], axis=2
+    )
+    control_spec = int(
+        mujoco.mjtState.mjSTATE_CTRL
+        | mujoco.mjtState.mjSTATE_MOCAP_POS
+        | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+    )
     datas = [mujoco.MjData(m) for _ in range(nthread)]
     with rollout.Rollout(nthread=nthread) as r:
-        r.rollout(m, datas, states, ctrl[:, :1])  # warm-up
+        r.rollout(m, datas, states, control[:, :1], control_spec=control_spec)  # warm-up
         t0 = time.perf_counter()
-        trajectory, _ = r.rollout(m, datas, states, ctrl)
+        trajectory, _ = r.rollout(m, datas, states, control, control_spec=control_spec)
         elapsed = time.perf_counter() - t0
     return {
         "nthread": nthread,
@@ -182,12 +225,20 @@ def main(argv: list[str] | None = None) -> dict:
         help="keep the script working, not measure: batch 2, 2 control steps, 2 threads, "
         "starts from native MuJoCo instead of env.reset, no env.step (one compile)",
     )
+    parser.add_argument(
+        "--no-native-env",
+        action="store_true",
+        help="skip env.step on native physics (timed at the env.step batches by default)",
+    )
     parser.add_argument("--out", default=None, help="JSON file to write")
     args = parser.parse_args(argv)
     if args.quick:
         args.batch_sizes, args.env_step_batches, args.control_steps = "2", "", 2
 
-    env = env_lib.make_env(args.task, mocap_source="synthetic")
+    env = env_lib.make_env(args.task, mocap_source="synthetic", physics="mjx")
+    native_env = None if args.no_native_env else env_lib.make_env(
+        args.task, mocap_source="synthetic", physics="native"
+    )
     nthread = min(2, os.cpu_count() or 1) if args.quick else os.cpu_count() or 1
     report = {
         "machine": {
@@ -212,11 +263,22 @@ def main(argv: list[str] | None = None) -> dict:
         res = measure_mjx(
             env, batch, args.control_steps, env_step=batch in env_step_batches, starts=starts
         )
-        native = measure_native(env, res.pop("_start"), res.pop("_actions"), nthread)
+        actions, mjx_state = res.pop("_actions"), res.pop("_state", None)
+        if native_env is not None and mjx_state is not None:
+            res["native_env"] = measure_native_env(native_env, mjx_state, actions)
+        native = measure_native(env, res.pop("_start"), actions, nthread)
         # Same starts, same set-points: the two simulators must end in nearly the same pose.
         res |= qpos_gaps(res.pop("_qpos"), native.pop("_qpos"))
         res["native"] = native
         res["mjx_over_native"] = res["physics_steps_per_s"] / native["physics_steps_per_s"]
+        if "native_env" in res:
+            ceiling = native["physics_steps_per_s"] / env.n_substeps  # control steps/s
+            res["native_env"]["over_rollout_ceiling"] = (
+                res["native_env"]["env_control_steps_per_s"] / ceiling
+            )
+            res["native_env"]["over_mjx_env_step"] = (
+                res["native_env"]["env_control_steps_per_s"] / res["env_control_steps_per_s"]
+            )
         report["results"].append(res)
         print(json.dumps(res, indent=1), flush=True)
         if args.out:

@@ -48,9 +48,8 @@ import mujoco
 import numpy as np
 from brax.envs.base import Env, State
 from flax import struct
-from mujoco import mjx
 
-from mjx_hands import ik, mocap, reward_params, rewards, scene, spatial
+from mjx_hands import ik, mocap, physics, reward_params, rewards, scene, spatial
 from mjx_hands import shadow_hand as sh
 
 TASKS = ("handshake", "handclap", "et")
@@ -157,6 +156,10 @@ class EnvConfig:
     """Most retreats per start; 0 keeps every drawn start as it is (the paper's)."""
     ik_iterations: int = 30
     """Damped least-squares iterations placing the arm at the start pose."""
+    physics: str = "auto"
+    """Physics implementation: 'mjx' (MJX, accelerators), 'native' (C MuJoCo on every
+    CPU core, called from the compiled program) or 'auto' (native on CPUs, MJX
+    elsewhere); see ``mjx_hands.physics``."""
     scene: scene.SceneConfig = scene.SceneConfig()
     """Physics settings."""
 
@@ -188,13 +191,15 @@ class HandInteractionEnv(Env):
         self.config = config
         self.episode_length = config.episode_length or EPISODE_LENGTH[config.task]
         self.mj_model = scene.build_model(config.scene)
-        self.mjx_model = mjx.put_model(self.mj_model)
         self.n_substeps = int(round(config.control_dt / config.scene.timestep))
         if abs(self.n_substeps * config.scene.timestep - config.control_dt) > 1e-9:
             raise ValueError(
                 f"control_dt={config.control_dt} is not a multiple of the physics timestep "
                 f"{config.scene.timestep}"
             )
+        self.physics = physics.make_physics(
+            config.physics, self.mj_model, self.n_substeps, config.contact_distance
+        )
         weights = config.weights or reward_params.variant(config.reward)
         self.weights = weights
         self.demos = mocap.load_demonstrations(
@@ -218,17 +223,13 @@ class HandInteractionEnv(Env):
         self.ctrl_lo, self.ctrl_hi = m.actuator_ctrlrange[:, 0].copy(), m.actuator_ctrlrange[:, 1].copy()
         self.jnt_lo, self.jnt_hi = m.jnt_range[:, 0].copy(), m.jnt_range[:, 1].copy()
         self.chain = ik.make_chain(m, scene.AGENT + "palm_center")
-        # Contact sensor of each geom (-1: none); a contact lights the sensor of its agent geom.
-        sensor_of_geom = -np.ones(m.ngeom, np.int32)
-        for s, (finger, phalanx) in enumerate(
-            (f, p) for f in sh.FINGERS for p in sh.PHALANGES
-        ):
-            body = m.body(scene.AGENT + sh.hand_name(sh.PHALANX_BODY[(finger, phalanx)])).id
-            sensor_of_geom[(m.geom_bodyid == body) & (m.geom_contype == 0) & (m.geom_group == 4)] = s
-        self.sensor_of_geom = sensor_of_geom
+        # Contact sensor of each geom (-1: none), as the scene's sensors define them.
+        _, self.sensor_of_geom = physics.sensor_objects(m)
         self.target_mocap = np.array(
             [m.body_mocapid[m.body(scene.TARGET + link).id] for link in scene.TARGET_LINKS]
         )
+        rest = mujoco.MjData(m)
+        self.mocap_pos0, self.mocap_quat0 = rest.mocap_pos.copy(), rest.mocap_quat.copy()
         # Distal-coupled joints follow their J1 in the start posture.
         self.coupled = np.array(
             [
@@ -264,7 +265,7 @@ class HandInteractionEnv(Env):
 
     @property
     def backend(self) -> str:
-        return "mjx"
+        return self.physics.name
 
     def reset(self, rng: jax.Array) -> State:
         """Start an episode with the paper's randomisation. rng: (2,) key."""
@@ -313,12 +314,11 @@ class HandInteractionEnv(Env):
 
         position_noise = self.config.start_position_noise * jax.random.normal(k_pos, (3,))
         joint_noise = self.config.start_joint_noise * jax.random.normal(k_joint, (20,))
-        data = mjx.make_data(self.mjx_model)
-        data = data.replace(
-            mocap_pos=data.mocap_pos.at[self.target_mocap].set(link_pos),
-            mocap_quat=data.mocap_quat.at[self.target_mocap].set(link_quat),
+        mocap = (
+            jnp.asarray(self.mocap_pos0, jnp.float32).at[self.target_mocap].set(link_pos),
+            jnp.asarray(self.mocap_quat0, jnp.float32).at[self.target_mocap].set(link_quat),
         )
-        start, data = self._separated_start(data, start, start_pose)
+        start, data = self._separated_start(mocap, start, start_pose)
 
         episode = EpisodeInfo(
             rng=rng,
@@ -331,7 +331,7 @@ class HandInteractionEnv(Env):
             target_frames=target_frames,
             goal_points=goal_points,
         )
-        features = self._features(data, episode)
+        features = self._features(self.physics.readings(data), episode)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
         metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
@@ -361,10 +361,10 @@ class HandInteractionEnv(Env):
 
     def _separated_start(
         self,
-        data: mjx.Data,
+        mocap: tuple[jax.Array, jax.Array],
         start: jax.Array,
         start_pose: Callable[[jax.Array, jax.Array], tuple[jax.Array, jax.Array, jax.Array]],
-    ) -> tuple[jax.Array, mjx.Data]:
+    ) -> tuple[jax.Array, Any]:
         """Forward the start pose, moving the start earlier in the demonstration (and,
         from its first step, farther out) while the hands interpenetrate.
 
@@ -385,12 +385,13 @@ class HandInteractionEnv(Env):
         At most ``start_retreats`` moves; starts without penetration stay as drawn.
 
         Args:
-          data: Data with the target hand's mocap poses set.
+          mocap: the target hand's mocap poses, (nmocap, 3) positions and (nmocap, 4)
+            quaternions.
           start: () drawn start step t_s.
           start_pose: (step, backoff metres) -> (palm goal (3,), palm rotation (3, 3),
             finger angles (20,)).
         Returns:
-          the start step used and ``data`` after ``mjx.forward`` at its pose.
+          the start step used and the physics state at rest at its pose.
         """
         cfg = self.config
 
@@ -402,9 +403,8 @@ class HandInteractionEnv(Env):
             earlier = jnp.maximum(step - cfg.start_backoff_steps, 1)
             step = jnp.where(retreat & ~at_first, earlier, step)
             qpos = self._start_qpos(*start_pose(step, backoff))
-            d = mjx.forward(self.mjx_model, data.replace(qpos=qpos, ctrl=qpos[self.actuated_qadr]))
-            depth = jnp.maximum(-jnp.min(d._impl.contact.dist), 0.0)
-            return step, backoff, d, depth, tries + 1
+            state = self.physics.pose(qpos, *mocap)
+            return step, backoff, state, self.physics.readings(state).penetration, tries + 1
 
         def penetrating(carry):
             step, _, _, depth, tries = carry
@@ -414,28 +414,18 @@ class HandInteractionEnv(Env):
 
         # One traced forward pass serves the drawn start and every retreat.
         zero = jnp.zeros(())
-        first = (start, zero, data, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
-        step, _, data, _, _ = jax.lax.while_loop(penetrating, attempt, first)
-        return step, data
+        shapes = jax.eval_shape(self.physics.pose, jnp.zeros(self.mj_model.nq), *mocap)
+        rest = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)  # carry type only
+        first = (start, zero, rest, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
+        step, _, state, _, _ = jax.lax.while_loop(penetrating, attempt, first)
+        return step, state
 
-    def physics(
-        self, data: mjx.Data, action: jax.Array, model: mjx.Model | None = None
-    ) -> mjx.Data:
-        """One control period: set-points from action (24,) in [-1, 1], then n_substeps steps.
-
-        ``model``: another compiled model of the same scene (e.g. other solver settings,
-        as benchmarks/cost_drivers.py varies them); default the env's own.
-        """
-        model = self.mjx_model if model is None else model
-        ctrl = self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
-        data = data.replace(ctrl=ctrl)
-        # GPUs default float32 matmuls to TF32 (10-bit mantissa), too coarse for the
-        # constraint solver; the physics keeps full float32 (a no-op on CPU).
-        with jax.default_matmul_precision("highest"):
-            return jax.lax.fori_loop(0, self.n_substeps, lambda _, d: mjx.step(model, d), data)
+    def ctrl_for(self, action: jax.Array) -> jax.Array:
+        """Set-points (24,) of the actuators for ``action`` (24,) in [-1, 1]."""
+        return self.ctrl_lo + 0.5 * (action + 1.0) * (self.ctrl_hi - self.ctrl_lo)
 
     def action_for(self, setpoints: jax.Array) -> jax.Array:
-        """The action (24,) in [-1, 1] whose set-points :meth:`physics` makes ``setpoints``
+        """The action (24,) in [-1, 1] whose set-points :meth:`ctrl_for` makes ``setpoints``
         (24,) (clipped to the actuators' ranges): the inverse of its mapping."""
         action = 2.0 * (setpoints - self.ctrl_lo) / (self.ctrl_hi - self.ctrl_lo) - 1.0
         return jnp.clip(action, -1.0, 1.0)
@@ -443,10 +433,11 @@ class HandInteractionEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)
-        data = self.physics(state.pipeline_state, action)
+        data = self.physics.step(state.pipeline_state, self.ctrl_for(action))
+        readings = self.physics.readings(data)
         episode = state.info["episode"]
         episode = episode.replace(step=episode.step + 1)
-        features = self._features(data, episode)
+        features = self._features(readings, episode)
 
         p = jax.tree.map(lambda x: x[episode.demo], self.params)
         terms = rewards.compute_rewards(
@@ -461,7 +452,7 @@ class HandInteractionEnv(Env):
         )
         success = rewards.success(features["contacts"], p.required_contacts).astype(jnp.float32)
 
-        finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
+        finite = readings.finite
         truncated = episode.step >= self.episode_length
         done = jnp.where(finite, truncated, True).astype(jnp.float32)
         # A diverged simulation ends its episode as a truncation at the last finite
@@ -491,34 +482,22 @@ class HandInteractionEnv(Env):
         )
 
     # --------------------------------------------------------------- features
-    def _features(self, data: mjx.Data, episode: EpisodeInfo) -> dict[str, jax.Array]:
+    def _features(self, readings: physics.Readings, episode: EpisodeInfo) -> dict[str, jax.Array]:
         """Everything the reward and the observation read from the simulation."""
-        points = jnp.concatenate(
-            [data.site_xpos[self.palm_site][None], data.site_xpos[self.tip_sites]], axis=0
-        )
         p = jax.tree.map(lambda x: x[episode.demo], self.params)
         offsets, _, imitation_active = rewards.reference_at(p, episode.start_step + episode.step)
         imitation_points = rewards.goal_positions(
             episode.target_points, episode.target_frames, p.j_min, offsets
         )
         return {
-            "qpos": data.qpos,
-            "qvel": data.qvel,
-            "points": points,
-            "hand_angles": data.qpos[self.hand_qadr],
-            "contacts": self._contacts(data),
+            "qpos": readings.qpos,
+            "qvel": readings.qvel,
+            "points": readings.points,
+            "hand_angles": readings.qpos[self.hand_qadr],
+            "contacts": readings.contacts,
             "imitation_points": imitation_points,
             "imitation_active": imitation_active.astype(jnp.float32),
         }
-
-    def _contacts(self, data: mjx.Data) -> jax.Array:
-        """The 15 contact-sensor readings (0/1) from MJX contact data. -> (15,)"""
-        contact = data._impl.contact
-        geom_sensor = jnp.asarray(self.sensor_of_geom)[contact.geom]  # (ncon, 2)
-        sensor = jnp.max(geom_sensor, axis=-1)  # the agent geom's sensor; target geoms are -1
-        touching = contact.dist < self.config.contact_distance
-        hits = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS)) * touching[:, None]
-        return jnp.max(hits, axis=0, initial=0.0)
 
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
         relative_points = f["points"] - episode.target_pos
@@ -625,9 +604,8 @@ def make_env(task: str = "handshake", num_envs: int | None = None, **overrides: 
 
 
 def model_sizes(env: HandInteractionEnv) -> dict[str, int]:
-    """Sizes that drive MJX cost: DoFs, actuators, contacts and constraint rows."""
+    """Sizes that drive physics cost: DoFs, actuators, contacts and MJX constraint rows."""
     m = env.mj_model
-    data = mjx.make_data(env.mjx_model)
     return {
         "nq": m.nq,
         "nv": m.nv,
@@ -636,8 +614,7 @@ def model_sizes(env: HandInteractionEnv) -> dict[str, int]:
         "ngeom": m.ngeom,
         "contact_pairs": m.npair,
         "equality_rows": m.neq,
-        "max_contacts": int(data._impl.contact.dist.shape[0]),
-        "constraint_rows": int(data._impl.efc_J.shape[0]),
+        **physics.mjx_sizes(m),
         "substeps": env.n_substeps,
     }
 
@@ -652,11 +629,17 @@ def _main() -> None:
     parser.add_argument("--num-envs", type=int, default=128, help="batch size")
     parser.add_argument("--steps", type=int, default=20, help="timed control steps")
     parser.add_argument("--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic"))
+    parser.add_argument("--physics", default="auto", choices=("auto",) + physics.PHYSICS)
     args = parser.parse_args()
 
-    env = make_env(args.task, num_envs=args.num_envs, mocap_source=args.mocap_source)
+    env = make_env(
+        args.task, num_envs=args.num_envs, mocap_source=args.mocap_source, physics=args.physics
+    )
     single = env.unwrapped
-    print(f"task {args.task}: {len(single.demos)} demonstrations ({single.demos[0].source})")
+    print(
+        f"task {args.task}: {len(single.demos)} demonstrations ({single.demos[0].source}), "
+        f"{single.physics.name} physics"
+    )
     for key, value in model_sizes(single).items():
         print(f"  {key:16s} {value}")
     print(f"  observation_size {env.observation_size}, action_size {env.action_size}")

@@ -20,6 +20,18 @@ What was changed from the stock hand model, and why (each item removes solver wo
 * the forearm's convex mesh collider goes (MJX mesh collisions are slow to
   compile and run); visual meshes stay for rendering and never collide;
 * no gravity (a gravity-compensated arm; the target hand is kinematic).
+
+What every physics implementation reads is defined here once, as MuJoCo sensors
+(``SENSOR_LAYOUT`` gives their slices of ``sensordata``): the palm centre and the five
+fingertip sites (``framepos``), the 15 contact sensors of ``CONTACT_SENSORS`` (one
+``contact`` sensor per phalanx collision geom: how many contacts it has and the
+distance of the closest) and the closest agent-target contact (for the
+penetration-free starts).
+A phalanx touches the target when its geom is closer than the environment's
+``contact_distance``: MJX lists every candidate pair with its distance, native MuJoCo
+only pairs within their margin, so ``physics.NativePhysics`` gives its copy of the
+model pair margins and gaps of that distance (contacts reported from there, forces
+still from 0).
 """
 
 from __future__ import annotations
@@ -69,6 +81,31 @@ class SceneConfig:
     """Contact dimensionality of agent-target pairs (3: sliding friction)."""
     friction: float = 1.0
     """Sliding friction coefficient of agent-target contacts."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SensorLayout:
+    """Slices of ``sensordata`` (length ``size``) holding what the environment reads."""
+
+    points: slice  # (6 * 3,) palm centre + fingertips, world, ``HAND_POINTS`` order
+    contacts: slice  # (15 * 2,) per phalanx geom (CONTACT_SENSORS order): number of
+    #                  contacts, distance of the closest one
+    closest: slice  # (2,) number of agent-target contacts, distance of the closest one
+    size: int
+
+
+_N_CONTACT = 2 * len(sh.CONTACT_SENSORS)
+_N_POINTS = 3 * len(sh.HAND_POINTS)
+SENSOR_LAYOUT = SensorLayout(
+    contacts=slice(0, _N_CONTACT),
+    points=slice(_N_CONTACT, _N_CONTACT + _N_POINTS),
+    closest=slice(_N_CONTACT + _N_POINTS, _N_CONTACT + _N_POINTS + 2),
+    size=_N_CONTACT + _N_POINTS + 2,
+)
+
+# mjtConDataBit bits of a contact sensor's data (found, dist) and its reductions.
+_CONDATA_FOUND, _CONDATA_DIST = 1 << 0, 1 << 3
+_REDUCE_MINDIST = 1
 
 
 def _hand_spec() -> mujoco.MjSpec:
@@ -191,6 +228,33 @@ def _add_pairs(world: mujoco.MjSpec, cfg: SceneConfig) -> None:
             )
 
 
+def _add_sensors(world: mujoco.MjSpec) -> None:
+    """The sensors of ``SENSOR_LAYOUT``, in its order (see module docstring)."""
+    for finger, phalanx in (name.split("_") for name in sh.CONTACT_SENSORS):
+        geom = AGENT + sh.hand_name("C_" + sh.PHALANX_BODY[(finger, phalanx)])
+        world.add_sensor(
+            name=f"contact/{finger}_{phalanx}",
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_GEOM,
+            objname=geom,
+            intprm=[_CONDATA_FOUND | _CONDATA_DIST, _REDUCE_MINDIST, 1],
+        )
+    for point, site in zip(sh.HAND_POINTS, ("palm_center",) + tuple(
+        sh.hand_name(f"S_{tip}") for tip in sh.FINGERTIPS
+    )):
+        world.add_sensor(
+            name=f"point/{point}",
+            type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=AGENT + site,
+        )
+    world.add_sensor(  # every contact matches: all of them are agent-target pairs
+        name="closest_contact",
+        type=mujoco.mjtSensor.mjSENS_CONTACT,
+        intprm=[_CONDATA_FOUND | _CONDATA_DIST, _REDUCE_MINDIST, 1],
+    )
+
+
 def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     """The full hand-pair scene as an ``MjSpec`` (see module docstring)."""
     world = mujoco.MjSpec.from_file(os.path.join(SCENE_DIR, "world.xml"))
@@ -201,6 +265,7 @@ def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     _add_agent(world)
     _add_target(world, hand_kinematics.hand_model())
     _add_pairs(world, cfg)
+    _add_sensors(world)
     world.add_numeric(name="max_geom_pairs", data=[cfg.max_geom_pairs])
     world.add_numeric(name="max_contact_points", data=[cfg.max_contact_points])
     return world

@@ -49,6 +49,9 @@ class TrainConfig:
     """Which demonstrations to read."""
     target_rotation_noise: float = 0.0
     """Std (radians) of a random per-episode rotation of the target hand."""
+    physics: Literal["auto", "mjx", "native"] = "auto"
+    """Physics: MJX (accelerators), native C MuJoCo on every CPU core (>10x MJX's speed
+    there) or auto (native on CPUs, MJX elsewhere)."""
     algo: Literal["ddpg", "sac", "ppo"] = "ddpg"
     """Learner: DDPG (the paper's) or Brax's SAC / PPO on the same environment."""
     preset: Literal["auto", "cpu", "gpu"] = "auto"
@@ -153,6 +156,7 @@ def make_envs(config: TrainConfig, num_devices: int):
             mocap_source=config.mocap_source,
             mocap_path=config.mocap,
             target_rotation_noise=config.target_rotation_noise,
+            physics=config.physics,
         )
     )
     train_env = env_lib.BatchedEnv(single, config.num_envs // num_devices)
@@ -329,6 +333,7 @@ RESUME_FIXED = (
     "imitation",
     "mocap_source",
     "mocap",
+    "physics",
     "num_envs",
     "algo",
     "ddpg.hidden_sizes",

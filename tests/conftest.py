@@ -22,12 +22,12 @@ def real_data_or_skip() -> Path:
 
 @pytest.fixture(scope="session")
 def handshake_env():
-    """A batched handshake env (project's synthetic demos) with jitted reset/step."""
+    """A batched handshake env on MJX (project's synthetic demos) with jitted reset/step."""
     import jax
 
     from mjx_hands import env as env_lib
 
-    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic")
+    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic", physics="mjx")
     return env, jax.jit(env.reset), jax.jit(env.step)
 
 
@@ -37,3 +37,14 @@ def reset_state(handshake_env):
 
     env, reset, _ = handshake_env
     return reset(jax.random.PRNGKey(42))
+
+
+@pytest.fixture(scope="session")
+def native_handshake_env():
+    """The same batched handshake env on native MuJoCo (compiles in seconds)."""
+    import jax
+
+    from mjx_hands import env as env_lib
+
+    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic", physics="native")
+    return env, jax.jit(env.reset), jax.jit(env.step)

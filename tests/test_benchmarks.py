@@ -70,7 +70,7 @@ def test_cost_driver_variants_change_a_copy_of_the_model_only():
     from benchmarks import cost_drivers
     from mjx_hands import env as env_lib
 
-    env = env_lib.make_env("handshake", mocap_source="synthetic")
+    env = env_lib.make_env("handshake", mocap_source="synthetic", physics="mjx")
     iterations = env.mj_model.opt.iterations
     one = cost_drivers.variant_model(env, cost_drivers.VARIANTS["1 Newton iteration"])
     no_contacts = cost_drivers.variant_model(env, cost_drivers.VARIANTS["contacts disabled"])
@@ -78,7 +78,7 @@ def test_cost_driver_variants_change_a_copy_of_the_model_only():
     assert no_contacts.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
     assert not env.mj_model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
     # Contact rows are fixed when Data is made: the variant's states must be rebuilt.
-    batch = jax.tree.map(lambda x: x[None], mjx.make_data(env.mjx_model))
+    batch = jax.tree.map(lambda x: x[None], mjx.make_data(env.physics.mjx_model))
     assert batch._impl.ncon > 0
     rebuilt = cost_drivers.on_model(no_contacts, batch)
     assert rebuilt._impl.ncon == 0

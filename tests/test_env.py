@@ -142,7 +142,8 @@ def test_a_start_at_the_first_step_backs_away_along_the_palm_line(handshake_env,
         del step  # the retreat must not move the step: it is already 1
         return jnp.asarray(base - push * away) + backoff * jnp.asarray(away), palm_rot, fingers
 
-    step, got = jax.jit(lambda d: single._separated_start(d, jnp.int32(1), start_pose))(data)
+    mocap_jnp = (data.mocap_pos, data.mocap_quat)
+    step, got = jax.jit(lambda m: single._separated_start(m, jnp.int32(1), start_pose))(mocap_jnp)
     assert int(step) == 1
     candidates = [
         native_depth(base + (k * cfg.start_backoff_distance - push) * away)
@@ -173,7 +174,8 @@ def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_sta
         if t < length - 1:
             assert not np.any(np.asarray(state.done))
         if t == length // 2:  # the per-sensor metrics are the sensors' readings
-            readings = np.asarray(jax.jit(jax.vmap(env.unwrapped._contacts))(state.pipeline_state))
+            contacts = jax.vmap(lambda d: env.unwrapped.physics.readings(d).contacts)
+            readings = np.asarray(jax.jit(contacts)(state.pipeline_state))
             logged = np.stack([state.metrics[f"contact/{n}"] for n in sh.CONTACT_SENSORS], -1)
             np.testing.assert_array_equal(logged, readings)
     assert np.all(np.isfinite(np.asarray(state.obs)))
@@ -197,8 +199,8 @@ def forward_and_contacts(handshake_env):
 
     @jax.jit
     def run(data):
-        data = mjx.forward(single.mjx_model, data)
-        return data, single._contacts(data)
+        data = mjx.forward(single.physics.mjx_model, data)
+        return data, single.physics.readings(data).contacts
 
     return single, run
 
@@ -252,7 +254,7 @@ def test_mjx_agrees_with_native_mujoco_on_a_short_rollout(handshake_env, reset_s
     @jax.jit
     def rollout(data, ctrl):
         def body(d, u):
-            d = mjx.step(single.mjx_model, d.replace(ctrl=u))
+            d = mjx.step(single.physics.mjx_model, d.replace(ctrl=u))
             return d, d.qpos
 
         return jax.lax.scan(body, data, ctrl)[1]

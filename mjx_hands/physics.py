@@ -1,0 +1,317 @@
+"""The physics step behind the environment: one seam, two implementations.
+
+Everything above the physics -- reset and its IK, rewards, observations, auto-reset,
+learners -- reads :class:`Readings` and advances a state one control period through
+a :class:`Physics`:
+
+* :class:`MjxPhysics` steps MJX inside the compiled program (accelerators; thousands
+  of environments). This module is the only one that reads MJX internals.
+* :class:`NativePhysics` steps C MuJoCo on every core from inside the compiled program:
+  a ``jax.pure_callback`` whose batched form hands the whole batch to one
+  ``mujoco.rollout`` call on a persistent thread pool (CPUs, where MJX runs the hand
+  pair at a tenth of native speed).
+
+Both read what the scene defines once as MuJoCo sensors (``scene.SENSOR_LAYOUT``):
+the palm centre and fingertip sites, the 15 phalanx contact sensors and the closest
+agent-target contact. Native MuJoCo computes the sensors itself; MJX computes the same
+quantities from its own kinematics and contact list (its sensor stage is switched
+off: it would cost every substep, and MJX counts a contact only within the margin the
+constraint uses).
+
+Where they differ: MJX keeps ``max_geom_pairs`` / ``max_contact_points`` contacts per
+collision group in float32; native MuJoCo keeps every contact, in float64 (its state
+is rounded to float32 between control periods, where it enters the JAX program), and
+starts each control period's solver cold where MJX carries its warm start
+(``benchmarks/native.py`` measures the difference).
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import threading
+from typing import Protocol
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import mujoco.rollout
+import numpy as np
+from flax import struct
+from mujoco import mjx
+
+from mjx_hands import scene
+from mjx_hands import shadow_hand as sh
+
+PHYSICS = ("mjx", "native")
+
+
+@struct.dataclass
+class Readings:
+    """What rewards, observations and resets read from a simulation (one env)."""
+
+    qpos: jax.Array  # (nq,) joint positions
+    qvel: jax.Array  # (nv,) joint velocities
+    points: jax.Array  # (6, 3) agent palm centre + fingertips, world, HAND_POINTS order
+    contacts: jax.Array  # (15,) 0/1 per CONTACT_SENSORS
+    penetration: jax.Array  # () deepest agent-target interpenetration, metres (0: apart)
+    finite: jax.Array  # () bool: the state holds no NaN or inf
+
+
+class Physics(Protocol):
+    """One control period of the hand-pair scene, for one environment (vmap batches it).
+
+    ``State`` is the implementation's own pytree; it has at least ``qpos``, ``qvel``,
+    ``ctrl``, ``mocap_pos`` and ``mocap_quat`` (what rendering and tools read).
+    """
+
+    name: str
+    mj_model: mujoco.MjModel
+
+    def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array):
+        """A state at rest at ``qpos`` (nq,), set-points on the actuated joints, the
+        target's mocap bodies at ``mocap_pos`` (nmocap, 3) / ``mocap_quat`` (nmocap, 4);
+        its readings are those of that pose."""
+
+    def step(self, state, ctrl: jax.Array):
+        """Advance one control period with set-points ``ctrl`` (nu,)."""
+
+    def readings(self, state) -> Readings:
+        """The readings of ``state`` (of the last substep's kinematics, as MuJoCo's
+        sensors of an ``mj_step``)."""
+
+
+def sensor_objects(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """From the scene's sensors: the sites of the 6 points (6,) and the contact-sensor
+    index of every geom (ngeom,), -1 for geoms without one."""
+    layout = scene.SENSOR_LAYOUT
+    by_adr = {int(m.sensor_adr[i]): i for i in range(m.nsensor)}
+    sites = [
+        int(m.sensor_objid[by_adr[a]]) for a in range(layout.points.start, layout.points.stop, 3)
+    ]
+    sensor_of_geom = -np.ones(m.ngeom, np.int32)
+    for s, adr in enumerate(range(layout.contacts.start, layout.contacts.stop, 2)):
+        sensor_of_geom[m.sensor_objid[by_adr[adr]]] = s
+    return np.array(sites), sensor_of_geom
+
+
+def _actuated_qpos_adr(m: mujoco.MjModel) -> np.ndarray:
+    return np.array([m.jnt_qposadr[j] for j in m.actuator_trnid[:, 0]])
+
+
+class MjxPhysics:
+    """MJX, ``n_substeps`` ``mjx.step`` per control period (see module docstring)."""
+
+    name = "mjx"
+
+    def __init__(self, mj_model: mujoco.MjModel, n_substeps: int, contact_distance: float):
+        self.mj_model = mj_model
+        self.n_substeps = n_substeps
+        self.contact_distance = contact_distance
+        self.point_sites, self.sensor_of_geom = sensor_objects(mj_model)
+        self.actuated_qadr = _actuated_qpos_adr(mj_model)
+        self.mjx_model = put_model(mj_model)
+
+    def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> mjx.Data:
+        data = mjx.make_data(self.mjx_model).replace(
+            qpos=qpos, ctrl=qpos[self.actuated_qadr], mocap_pos=mocap_pos, mocap_quat=mocap_quat
+        )
+        with jax.default_matmul_precision("highest"):
+            return mjx.forward(self.mjx_model, data)
+
+    def step(self, data: mjx.Data, ctrl: jax.Array, model: mjx.Model | None = None) -> mjx.Data:
+        """``model``: another compiled model of the same scene (benchmarks vary solver
+        settings); default the physics' own."""
+        model = self.mjx_model if model is None else model
+        data = data.replace(ctrl=ctrl)
+        # GPUs default float32 matmuls to TF32 (10-bit mantissa), too coarse for the
+        # constraint solver; the physics keeps full float32 (a no-op on CPU).
+        with jax.default_matmul_precision("highest"):
+            return jax.lax.fori_loop(0, self.n_substeps, lambda _, d: mjx.step(model, d), data)
+
+    def readings(self, data: mjx.Data) -> Readings:
+        contact = data._impl.contact
+        geom_sensor = jnp.asarray(self.sensor_of_geom)[contact.geom]  # (ncon, 2)
+        sensor = jnp.max(geom_sensor, axis=-1)  # the agent geom's sensor; target geoms are -1
+        touching = contact.dist < self.contact_distance
+        hits = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS)) * touching[:, None]
+        return Readings(
+            qpos=data.qpos,
+            qvel=data.qvel,
+            points=data.site_xpos[self.point_sites],
+            contacts=jnp.max(hits, axis=0, initial=0.0),
+            penetration=jnp.maximum(-jnp.min(contact.dist, initial=jnp.inf), 0.0),
+            finite=jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all(),
+        )
+
+
+def put_model(mj_model: mujoco.MjModel) -> mjx.Model:
+    """The MJX model of the scene, its sensor stage off (see module docstring)."""
+    m = copy.copy(mj_model)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    return mjx.put_model(m)
+
+
+def mjx_sizes(mj_model: mujoco.MjModel) -> dict[str, int]:
+    """Sizes that drive MJX cost: contacts and constraint rows of one ``mjx.Data``."""
+    data = mjx.make_data(put_model(mj_model))
+    return {
+        "max_contacts": int(data._impl.contact.dist.shape[0]),
+        "constraint_rows": int(data._impl.efc_J.shape[0]),
+    }
+
+
+@struct.dataclass
+class NativeState:
+    """A native simulation between control periods (float32 in the JAX program)."""
+
+    qpos: jax.Array  # (nq,)
+    qvel: jax.Array  # (nv,)
+    ctrl: jax.Array  # (nu,) set-points of the last control period
+    mocap_pos: jax.Array  # (nmocap, 3)
+    mocap_quat: jax.Array  # (nmocap, 4)
+    time: jax.Array  # () seconds
+    sensordata: jax.Array  # (nsensordata,) of the last substep's kinematics
+
+
+class NativePhysics:
+    """C MuJoCo through ``mujoco.rollout`` on a thread pool (see module docstring)."""
+
+    name = "native"
+
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        n_substeps: int,
+        contact_distance: float,
+        threads: int | None = None,
+    ):
+        self.mj_model = mj_model
+        self.n_substeps = n_substeps
+        self.contact_distance = contact_distance
+        self.actuated_qadr = _actuated_qpos_adr(mj_model)
+        # Native MuJoCo only reports pairs within their margin; a gap of the same size
+        # keeps forces from acting before the geoms touch (as with no margin).
+        m = copy.copy(mj_model)
+        m.pair_margin[:] = contact_distance
+        m.pair_gap[:] = contact_distance
+        # A diverged simulation shows as NaN (the env ends that episode), not as a
+        # silent reset to the model's initial pose.
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        self.native_model = m
+        self.threads = max(1, threads or os.cpu_count() or 1)
+        self._datas = [mujoco.MjData(m) for _ in range(self.threads)]
+        self._pool = mujoco.rollout.Rollout(nthread=self.threads if self.threads > 1 else 0)
+        self._lock = threading.Lock()  # one rollout at a time (several devices may call)
+        self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._control_spec = (
+            mujoco.mjtState.mjSTATE_CTRL
+            | mujoco.mjtState.mjSTATE_MOCAP_POS
+            | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+        )
+        if mujoco.mj_stateSize(m, self._state_spec) != 1 + m.nq + m.nv:
+            raise ValueError("NativePhysics expects a model without activations, history or plugins")
+
+    # ---------------------------------------------------------------- Physics
+    def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> NativeState:
+        m = self.mj_model
+        state = NativeState(
+            qpos=qpos,
+            qvel=jnp.zeros(m.nv, jnp.float32),
+            ctrl=qpos[self.actuated_qadr],
+            mocap_pos=mocap_pos,
+            mocap_quat=mocap_quat,
+            time=jnp.zeros((), jnp.float32),
+            sensordata=jnp.zeros(m.nsensordata, jnp.float32),
+        )
+        # One step computes the sensors at the given pose before it integrates; the
+        # integrated state is dropped.
+        _, _, _, sensordata = self._rollout(state, 1)
+        return state.replace(sensordata=sensordata)
+
+    def step(self, state: NativeState, ctrl: jax.Array) -> NativeState:
+        state = state.replace(ctrl=ctrl)
+        qpos, qvel, time, sensordata = self._rollout(state, self.n_substeps)
+        return state.replace(qpos=qpos, qvel=qvel, time=time, sensordata=sensordata)
+
+    def readings(self, state: NativeState) -> Readings:
+        layout = scene.SENSOR_LAYOUT
+        found, dist = state.sensordata[layout.closest]
+        per_geom = state.sensordata[layout.contacts].reshape(len(sh.CONTACT_SENSORS), 2)
+        touching = (per_geom[:, 0] > 0) & (per_geom[:, 1] < self.contact_distance)
+        return Readings(
+            qpos=state.qpos,
+            qvel=state.qvel,
+            points=state.sensordata[layout.points].reshape(len(sh.HAND_POINTS), 3),
+            contacts=touching.astype(jnp.float32),
+            penetration=jnp.where(found > 0, jnp.maximum(-dist, 0.0), 0.0),
+            finite=jnp.isfinite(state.qpos).all() & jnp.isfinite(state.qvel).all(),
+        )
+
+    # ------------------------------------------------------------- the callback
+    def _rollout(self, state: NativeState, nstep: int):
+        """(qpos, qvel, time, sensordata) after ``nstep`` physics steps; under vmap one
+        host call receives the whole batch."""
+        m = self.mj_model
+        shapes = (
+            jax.ShapeDtypeStruct((m.nq,), jnp.float32),
+            jax.ShapeDtypeStruct((m.nv,), jnp.float32),
+            jax.ShapeDtypeStruct((), jnp.float32),
+            jax.ShapeDtypeStruct((m.nsensordata,), jnp.float32),
+        )
+        return jax.pure_callback(
+            lambda *a: self.run(*a, nstep=nstep),
+            shapes,
+            state.time,
+            state.qpos,
+            state.qvel,
+            state.ctrl,
+            state.mocap_pos,
+            state.mocap_quat,
+            vmap_method="broadcast_all",
+        )
+
+    def run(self, time, qpos, qvel, ctrl, mocap_pos, mocap_quat, *, nstep: int):
+        """Host side: any leading batch shape; float32 in and out, float64 inside."""
+        m = self.native_model
+        lead = np.shape(qpos)[:-1]
+        batch = int(np.prod(lead, dtype=np.int64))
+        flat = lambda x, n: np.asarray(x, np.float64).reshape(batch, n)
+        initial = np.concatenate(
+            [flat(time, 1), flat(qpos, m.nq), flat(qvel, m.nv)], axis=1
+        )
+        control = np.concatenate(
+            [flat(ctrl, m.nu), flat(mocap_pos, 3 * m.nmocap), flat(mocap_quat, 4 * m.nmocap)],
+            axis=1,
+        )[:, None, :]
+        with self._lock:
+            states, sensordata = self._pool.rollout(
+                m,
+                self._datas,
+                initial,
+                control,
+                control_spec=int(self._control_spec),
+                nstep=nstep,
+                initial_warmstart=np.zeros((batch, m.nv)),
+            )
+        last = states[:, -1]
+        f32 = lambda x, shape: np.asarray(x, np.float32).reshape(lead + shape)
+        return (
+            f32(last[:, 1 : 1 + m.nq], (m.nq,)),
+            f32(last[:, 1 + m.nq :], (m.nv,)),
+            f32(last[:, 0], ()),
+            f32(sensordata[:, -1], (m.nsensordata,)),
+        )
+
+
+def make_physics(
+    name: str, mj_model: mujoco.MjModel, n_substeps: int, contact_distance: float
+) -> MjxPhysics | NativePhysics:
+    """The physics ``name`` ('mjx', 'native' or 'auto': native on CPUs, MJX elsewhere)."""
+    if name == "auto":
+        name = "native" if jax.default_backend() == "cpu" else "mjx"
+    if name == "mjx":
+        return MjxPhysics(mj_model, n_substeps, contact_distance)
+    if name == "native":
+        return NativePhysics(mj_model, n_substeps, contact_distance)
+    raise ValueError(f"unknown physics {name!r}; expected one of auto, {', '.join(PHYSICS)}")
