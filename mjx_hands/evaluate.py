@@ -53,6 +53,9 @@ class EvalArgs:
     """Video width in pixels (a multiple of 16 keeps codecs from resizing)."""
     height: int = 384
     """Video height in pixels."""
+    physics: Literal["run", "auto", "mjx", "native"] = "run"
+    """Physics of the evaluation episodes: the run's own, or another implementation of
+    the same scene (e.g. a policy trained on native MuJoCo evaluated on MJX)."""
 
 
 def restore_run(
@@ -198,6 +201,12 @@ def main(argv: list[str] | None = None) -> int:
             run_dir, args.step, args.episodes, args.best
         )
         _check_video_size(single.mj_model, args)
+        if args.physics != "run":
+            from mjx_hands import env as env_lib
+
+            single = env_lib.HandInteractionEnv(
+                dataclasses.replace(single.config, physics=args.physics)
+            )
     except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -212,6 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         "checkpoint": {"kind": "best" if args.best else "latest" if args.step is None else "step",
                        "epoch": epoch},
         "episodes": args.episodes,
+        "physics": single.backend,
     } | metrics
     if profile is not None:
         summary["contact_profile"] = profile
