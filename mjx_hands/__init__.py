@@ -1,12 +1,31 @@
 """mjx_hands: demonstration-guided RL of dexterous human-robot hand interactions in MJX.
 
-``make_env`` is imported lazily so that ``import mjx_hands`` stays cheap.
+``make_env`` is imported lazily so that ``import mjx_hands`` stays cheap (it imports
+``mujoco.mjx``, quietly, and sets XLA's CPU flags).
 """
+
+import contextlib
+import io
+import sys
 
 from mjx_hands import xla_flags
 
 # Before JAX starts a backend: MJX physics on CPU is ~4x faster with it (see xla_flags).
 xla_flags.configure_cpu_codegen()
+
+
+def _import_mjx_quietly() -> None:
+    """Import ``mujoco.mjx`` (Brax imports it too) without the two lines it prints when
+    its optional Warp backend is absent; the project runs MJX's JAX implementation."""
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        import mujoco.mjx  # noqa: F401
+    for line in printed.getvalue().splitlines():
+        if not line.startswith(("Failed to import warp", "Failed to import mujoco_warp")):
+            print(line, file=sys.stdout)
+
+
+_import_mjx_quietly()
 
 __all__ = ["TASKS", "make_env"]
 TASKS = ("handshake", "handclap", "et")
