@@ -63,9 +63,9 @@ def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomizatio
             state = super().step(state, action)
             totals["sum_reward"] = totals["sum_reward"] + state.reward
             totals["length"] = totals["length"] + 1.0
-            for key in totals:
+            for key, total in totals.items():
                 if key in state.metrics and key not in ("sum_reward", "length", "reward"):
-                    totals[key] = totals[key] + state.metrics[key]
+                    totals[key] = total + state.metrics[key]
             state.info.update(steps=steps, episode_done=state.done, episode_metrics=totals)
             return state
 
@@ -106,19 +106,19 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
             flush=True,
         )
 
-    common = dict(
-        environment=single,
-        num_timesteps=num_timesteps,
-        episode_length=episode_length,
-        num_envs=config.num_envs,
-        num_eval_envs=config.eval_envs,
-        discounting=gamma,
-        seed=config.seed,
-        num_evals=num_evals,
-        normalize_observations=True,
-        progress_fn=progress,
-        wrap_env_fn=wrap_for_brax,
-    )
+    common = {
+        "environment": single,
+        "num_timesteps": num_timesteps,
+        "episode_length": episode_length,
+        "num_envs": config.num_envs,
+        "num_eval_envs": config.eval_envs,
+        "discounting": gamma,
+        "seed": config.seed,
+        "num_evals": num_evals,
+        "normalize_observations": True,
+        "progress_fn": progress,
+        "wrap_env_fn": wrap_for_brax,
+    }
     hidden = tuple(ddpg.hidden_sizes)
     if config.algo == "ppo":
         make_policy, params, _ = ppo.train(

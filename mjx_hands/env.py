@@ -191,7 +191,7 @@ class HandInteractionEnv(Env):
         self.config = config
         self.episode_length = config.episode_length or EPISODE_LENGTH[config.task]
         self.mj_model = scene.build_model(config.scene)
-        self.n_substeps = int(round(config.control_dt / config.scene.timestep))
+        self.n_substeps = round(config.control_dt / config.scene.timestep)
         if abs(self.n_substeps * config.scene.timestep - config.control_dt) > 1e-9:
             raise ValueError(
                 f"control_dt={config.control_dt} is not a multiple of the physics timestep "

@@ -251,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.height,
                 fps=1.0 / single.config.control_dt,
             )
-        except Exception as err:  # no GL context, codec missing, ...: say so, keep eval.json
+        except Exception as err:  # noqa: BLE001 - no GL context, codec missing, ...: say so, keep eval.json
             print(
                 f"error: rendering failed ({type(err).__name__}: {err}); the evaluation is in "
                 f"{run_dir / 'eval.json'}. Headless machines need MUJOCO_GL=egl or osmesa.",

@@ -40,7 +40,6 @@ import numpy as np
 from flax import struct
 from mujoco import mjx
 
-
 from mjx_hands import scene
 from mjx_hands import shadow_hand as sh
 

@@ -35,7 +35,7 @@ def handshake_env():
 def reset_state(handshake_env):
     import jax
 
-    env, reset, _ = handshake_env
+    _, reset, _ = handshake_env
     return reset(jax.random.PRNGKey(42))
 
 

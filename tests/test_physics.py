@@ -108,8 +108,8 @@ def both_rollouts(native_handshake_env, handshake_env, reset_state):
     out = {k: [jax.tree.map(np.asarray, v)] for k, v in states.items()}  # [0]: the starts
     for a in jnp.asarray(actions, jnp.float32):
         states = {"mjx": mjx_step(states["mjx"], a), "native": native_step(states["native"], a)}
-        for k in out:
-            out[k].append(jax.tree.map(np.asarray, states[k]))
+        for k, trajectory in out.items():
+            trajectory.append(jax.tree.map(np.asarray, states[k]))
     return out
 
 
@@ -285,7 +285,7 @@ def test_native_physics_trains_on_two_cpu_devices(tmp_path):
                JAX_PLATFORMS="cpu")
     result = subprocess.run(
         [sys.executable, "-c", TWO_DEVICE_NATIVE_SCRIPT, str(tmp_path / "run")],
-        cwd=Path(__file__).resolve().parents[1], env=env, capture_output=True, text=True,
+        cwd=Path(__file__).resolve().parents[1], env=env, capture_output=True, text=True, check=False,
         timeout=900,
     )
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]

@@ -100,7 +100,7 @@ def reference_alg1(demo, weights, dt):
 
     def lerp(x, k):
         f = min(k * r, t_min)
-        lo = int(math.floor(f))
+        lo = math.floor(f)
         hi = min(lo + 1, len(x) - 1)
         return (1 - (f - lo)) * x[lo] + (f - lo) * x[hi]
 
@@ -112,16 +112,16 @@ def reference_alg1(demo, weights, dt):
             w.append(weights.K_p * max(d_min, floor) / max(dist(t_min, i), floor))
     else:
         w = [weights.K_p] + [0.0] * 5
-    return dict(
-        t_min=t_min, j_min=j_min, d_min=d_min, n_valid=n_valid,
-        goal_offsets=np.array([offset(t_min, i) for i in range(6)]),
-        goal_angles=demo.actor_joints[t_min],
-        ref_offsets=lambda k: lerp(offsets, k),
-        ref_angles=lambda k: lerp(demo.actor_joints, k),
-        ref_palm_pos=lambda k: lerp(demo.actor_points[:, 0], k),
-        ref_target_joints=lambda k: lerp(demo.target_joints, k),
-        w_position=np.array(w),
-    )  # fmt: skip
+    return {
+        "t_min": t_min, "j_min": j_min, "d_min": d_min, "n_valid": n_valid,
+        "goal_offsets": np.array([offset(t_min, i) for i in range(6)]),
+        "goal_angles": demo.actor_joints[t_min],
+        "ref_offsets": lambda k: lerp(offsets, k),
+        "ref_angles": lambda k: lerp(demo.actor_joints, k),
+        "ref_palm_pos": lambda k: lerp(demo.actor_points[:, 0], k),
+        "ref_target_joints": lambda k: lerp(demo.target_joints, k),
+        "w_position": np.array(w),
+    }  # fmt: skip
 
 
 # ------------------------------------------------------------- reusable plausibility check
@@ -308,13 +308,13 @@ def test_touching_fingertip_weight_is_floored():
 @pytest.mark.parametrize(
     "change, match",
     [
-        (dict(contact_end=40), "beyond the data"),
-        (dict(contact_begin=31), "contact_begin <= contact_end"),
-        (dict(contact_begin=-1), "contact_begin <= contact_end"),
-        (dict(task="hug"), "unknown task"),
-        (dict(fps=0.0), "fps must be"),
-        (dict(actor_joints=np.zeros((40, 19))), "actor_joints has shape"),
-        (dict(target_frames=np.zeros((39, 6, 3, 3))), "target_frames has shape"),
+        ({"contact_end": 40}, "beyond the data"),
+        ({"contact_begin": 31}, "contact_begin <= contact_end"),
+        ({"contact_begin": -1}, "contact_begin <= contact_end"),
+        ({"task": "hug"}, "unknown task"),
+        ({"fps": 0.0}, "fps must be"),
+        ({"actor_joints": np.zeros((40, 19))}, "actor_joints has shape"),
+        ({"target_frames": np.zeros((39, 6, 3, 3))}, "target_frames has shape"),
     ],
 )
 def test_bad_demo_raises(change, match):

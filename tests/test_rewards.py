@@ -55,14 +55,14 @@ def random_rotation(rng):
 def random_inputs(rng, batch=()):
     n = int(np.prod(batch))
     rots = np.array([[random_rotation(rng) for _ in range(6)] for _ in range(n)])
-    return dict(
-        hand_points=rng.uniform(-0.3, 0.3, batch + (6, 3)).astype(np.float32),
-        target_points=rng.uniform(-0.3, 0.3, batch + (6, 3)).astype(np.float32),
-        target_frames=rots.reshape(batch + (6, 3, 3)).astype(np.float32),
-        hand_angles=rng.uniform(-1, 1, batch + (20,)).astype(np.float32),
-        contacts=(rng.uniform(size=batch + (15,)) < 0.5).astype(np.float32),
-        action=rng.uniform(-1, 1, batch + (24,)).astype(np.float32),
-    )
+    return {
+        "hand_points": rng.uniform(-0.3, 0.3, batch + (6, 3)).astype(np.float32),
+        "target_points": rng.uniform(-0.3, 0.3, batch + (6, 3)).astype(np.float32),
+        "target_frames": rots.reshape(batch + (6, 3, 3)).astype(np.float32),
+        "hand_angles": rng.uniform(-1, 1, batch + (20,)).astype(np.float32),
+        "contacts": (rng.uniform(size=batch + (15,)) < 0.5).astype(np.float32),
+        "action": rng.uniform(-1, 1, batch + (24,)).astype(np.float32),
+    }
 
 
 # -------------------------------------------------------------- loop transcription
