@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_hands import hand_kinematics
+from mjx_hands import hand_kinematics, package_data
 from mjx_hands.shadow_hand import HAND_JOINTS, HAND_POINTS
 
 TASKS = ("handshake", "handclap", "et")
@@ -66,10 +66,10 @@ human handshakes (Frontiers in Robotics and AI 9:758519, 2022) for ~105-170 Hz. 
 OptiTrack's standard rate, is inside all three; at it the approach peaks at 0.5-0.7 m/s
 (handshake) and 0.7-1.2 m/s (hand clap). Pass ``fps=`` to assume another rate."""
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = package_data.REPO_ROOT
 REAL_DATA_PATH = REPO_ROOT.parent / "shared" / "mocap" / "drl_handshake"
 """The authors' release beside the repository (read-only, never copied in)."""
-SYNTHETIC_PATH = REPO_ROOT / "mocap_data"
+SYNTHETIC_PATH = package_data.data_dir("mocap_data")
 """The project's own demonstrations."""
 
 CAPTURE_TO_SIM = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])

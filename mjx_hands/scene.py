@@ -43,10 +43,10 @@ import os
 import mujoco
 import numpy as np
 
-from mjx_hands import hand_kinematics
+from mjx_hands import hand_kinematics, package_data
 from mjx_hands import shadow_hand as sh
 
-SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+SCENE_DIR = os.fspath(package_data.data_dir("scenes"))
 AGENT = "agent/"
 TARGET = "target/"
 

@@ -445,17 +445,14 @@ def test_checkpoint_round_trips_empty_and_nested_arrays(tmp_path):
 
 
 def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
-    import importlib.util
+    from mjx_hands import train_cli
 
-    spec = importlib.util.spec_from_file_location("train_cli", ROOT / "train.py")
-    train_cli = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(train_cli)
     run_dir = tmp_path / "run"
     config = _config(run_dir, epochs=1, eval_every=1, seed=5)
     training.run(config, out=io.StringIO(), env_factory=point_factory)
-    resumed = train_cli._defaults(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
+    resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
     assert resumed == config  # the command line's --epochs is applied by tyro on top
-    fresh = train_cli._defaults(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
+    fresh = train_cli.default_config(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
     assert fresh == training.preset("cpu")
 
 

@@ -1,0 +1,83 @@
+"""The training command: ``python train.py`` in a checkout, ``mjx-hands-train`` once
+installed (both call :func:`main`)."""
+
+from __future__ import annotations
+
+import sys
+
+USAGE = """Train a hand-interaction policy: the project's single command.
+
+    python train.py --task handshake            # the paper's DDPG, preset by device
+    python train.py --task et --no-imitation    # an ablation
+    python train.py --run-dir runs/x --resume   # continue a run with its own config
+    python train.py --run-dir runs/x --resume --epochs 400   # ... and a larger budget
+
+(installed: mjx-hands-train with the same options). Everything written goes to the run
+directory: config.json, metrics.csv, TensorBoard events (``tensorboard --logdir runs``),
+Orbax checkpoints and success.png. ``python -m mjx_hands.evaluate RUN_DIR`` (installed:
+mjx-hands-evaluate) reloads the policy and renders a video."""
+
+
+def _option(argv: list[str], name: str) -> str | None:
+    """Value of ``--name V`` or ``--name=V`` in argv, read before the full parse."""
+    for i, arg in enumerate(argv):
+        if arg == name and i + 1 < len(argv):
+            return argv[i + 1]
+        if arg.startswith(name + "="):
+            return arg.split("=", 1)[1]
+    return None
+
+
+def default_config(argv: list[str]):
+    """The config the command line overrides: a resumed run's own, else the preset's."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from mjx_hands import training
+
+    run_dir = _option(argv, "--run-dir") or _option(argv, "--run_dir")
+    if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
+        saved = json.loads((Path(run_dir) / "config.json").read_text())
+        try:
+            config = training.config_from_json(saved)
+        except TypeError as err:  # a key this version does not know
+            raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
+        return dataclasses.replace(config, resume=False)
+    return training.preset(_option(argv, "--preset") or "auto")
+
+
+def main(argv: list[str] | None = None) -> int:
+    import tyro
+
+    from mjx_hands import checkpoint, training
+    from mjx_hands.mocap import MocapError
+
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        default = default_config(argv)
+        config = tyro.cli(training.TrainConfig, default=default, args=argv, description=USAGE)
+        summary = training.run(config)
+    except training.TrainingDiverged as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 3
+    except (
+        ValueError,
+        MocapError,
+        checkpoint.CheckpointError,
+        FileNotFoundError,
+        FileExistsError,
+    ) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    final = summary["final_eval"]
+    print(
+        f"done ({summary['stop_reason']}): {summary['epochs']} epochs, "
+        f"eval success {final.get('eval/success', float('nan')):.2f}, "
+        f"best {summary['best_eval_success']:.2f}"
+        + (f" (epoch {summary['best_checkpoint']}, policy in best/)"
+           if summary.get("best_checkpoint") is not None else "")
+        + f"; results in {summary['run_dir']}"
+    )
+    return 0
+
