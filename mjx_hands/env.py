@@ -105,6 +105,19 @@ def target_tilt(rng: jax.Array, noise: float, angle: float | None = None) -> jax
     return spatial.axis_angle_quat(axis, jnp.asarray(angle, jnp.float32))
 
 
+def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
+    """The reward knobs ``config`` asks for: its ``weights``, or its variant and imitation."""
+    if config.weights is not None:
+        if config.reward != "full" or not config.imitation:
+            raise ValueError(
+                f"EnvConfig: reward={config.reward!r}, imitation={config.imitation} and weights "
+                "given together; weights hold every knob: give either weights or reward/imitation"
+            )
+        return config.weights
+    weights = reward_params.variant(config.reward)
+    return weights if config.imitation else dataclasses.replace(weights, imitation=False)
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Everything that defines an environment instance (all static under jit)."""
@@ -114,8 +127,11 @@ class EnvConfig:
     reward: str = "full"
     """Reward variant: 'full', 'baseline1' (palm position), 'baseline2' (no contact),
     'no_imitation'."""
+    imitation: bool = True
+    """Imitation terms r_pI, r_αI on top of the variant (False: any variant without them)."""
     weights: reward_params.RewardWeights | None = None
-    """The six reward knobs; None takes the variant's defaults."""
+    """Every reward knob at once, instead of ``reward`` and ``imitation`` (None: the
+    variant's defaults)."""
     mocap_source: str = "auto"
     """'optitrack' (the authors' recordings), 'synthetic' (mocap_data/) or 'auto'."""
     mocap_path: str | None = None
@@ -200,8 +216,8 @@ class HandInteractionEnv(Env):
         self.physics = physics.make_physics(
             config.physics, self.mj_model, self.n_substeps, config.contact_distance
         )
-        weights = config.weights or reward_params.variant(config.reward)
-        self.weights = weights
+        self.weights = reward_weights(config)
+        weights = self.weights
         self.demos = mocap.load_demonstrations(
             config.task, source=config.mocap_source, path=config.mocap_path
         )

@@ -143,16 +143,11 @@ def make_envs(config: TrainConfig, num_devices: int):
                 f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
                 f"the {num_devices} devices"
             )
-    from mjx_hands import reward_params
-
-    weights = reward_params.variant(config.reward)
-    if not config.imitation:
-        weights = dataclasses.replace(weights, imitation=False)
     single = env_lib.HandInteractionEnv(
         env_lib.EnvConfig(
             task=config.task,
-            reward=config.reward,  # a label here: the weights below decide
-            weights=weights,
+            reward=config.reward,
+            imitation=config.imitation,
             mocap_source=config.mocap_source,
             mocap_path=config.mocap,
             target_rotation_noise=config.target_rotation_noise,
@@ -390,6 +385,16 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     ckpt_dir = run_dir / "checkpoints"
     best_dir = run_dir / BEST_DIR
     config_path = run_dir / "config.json"
+    if config.algo != "ddpg":
+        if config.resume:
+            raise ValueError(
+                f"--resume continues DDPG runs only: --algo {config.algo} (Brax's trainer) "
+                "keeps no checkpoint to continue from; start it in a new --run-dir"
+            )
+        if config_path.exists() or (run_dir / "metrics.csv").exists():
+            raise FileExistsError(
+                f"{run_dir} already holds a run; choose another --run-dir for --algo {config.algo}"
+            )
     if config.resume:
         if not config_path.is_file():
             raise FileNotFoundError(

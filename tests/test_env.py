@@ -379,3 +379,19 @@ def test_target_tilt_angle_is_exact_or_gaussian_about_uniform_axes():
     zero = jax.jit(jax.vmap(lambda k: env_lib.target_tilt(k, 0.0)))(keys[:8])
     np.testing.assert_allclose(np.asarray(zero), np.tile([1.0, 0, 0, 0], (8, 1)), atol=1e-7)
 
+
+
+def test_the_reward_is_given_one_way():
+    """Variant and imitation, or every knob as weights; both at once is refused."""
+    import dataclasses
+
+    from mjx_hands import reward_params as rp
+
+    cfg = env_lib.EnvConfig(task="et", reward="baseline1", imitation=False)
+    want = dataclasses.replace(rp.variant("baseline1"), imitation=False)
+    assert env_lib.reward_weights(cfg) == want
+    assert env_lib.reward_weights(env_lib.EnvConfig(task="et")) == rp.variant("full")
+    mine = rp.RewardWeights(K_p=2.0)
+    assert env_lib.reward_weights(env_lib.EnvConfig(weights=mine)) == mine
+    with pytest.raises(ValueError, match="give either weights or reward/imitation"):
+        env_lib.reward_weights(env_lib.EnvConfig(reward="baseline2", weights=mine))

@@ -263,6 +263,7 @@ def test_train_py_help_lists_the_typed_options():
         (["--task", "wave"], "wave"),
         (["--num-envs", "0"], "--num-envs must be positive"),
         (["--mocap", "/nonexistent/mocap", "--mocap-source", "optitrack"], "/nonexistent/mocap"),
+        (["--algo", "sac", "--resume"], "--resume continues DDPG runs only"),
     ],
 )
 def test_train_py_bad_input_gets_a_message_not_a_traceback(args, message, tmp_path):
@@ -515,3 +516,12 @@ def test_metrics_log_survives_a_short_row(tmp_path):
         {"epoch": 2.0, "train/env_steps": 20.0},
     ]
     log.close()
+
+
+def test_brax_trainers_refuse_a_run_directory_that_holds_a_run(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "metrics.csv").write_text("epoch\n1\n")
+    with pytest.raises(FileExistsError, match="choose another --run-dir for --algo ppo"):
+        training.run(_config(run_dir, algo="ppo"), out=io.StringIO(), env_factory=point_factory)
+    assert (run_dir / "metrics.csv").read_text() == "epoch\n1\n"
