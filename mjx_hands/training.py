@@ -411,13 +411,15 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         return brax_agents.run(config, run_dir, out=out, env_factory=env_factory)
 
     run_dir.mkdir(parents=True, exist_ok=True)
+    print(f"building the {config.task} environment and learner ...", file=out, flush=True)
     algo, single = make_learner(config, env_factory=env_factory)
     demos = getattr(single, "demos", None)
     source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
     print(
-        f"{config.task}: {source}, "
+        f"{config.task}: {source}, {getattr(single, 'backend', '?')} physics, "
         f"{config.num_envs} envs on {algo.num_devices} {jax.default_backend()} device(s), "
-        f"episode {single.episode_length} steps, run dir {run_dir}",
+        f"episode {single.episode_length} steps, run dir {run_dir} "
+        f"({time.perf_counter() - launched:.0f} s)",
         file=out,
         flush=True,
     )
@@ -469,6 +471,13 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         best = row
 
     previous_sigterm = _interrupt_on_sigterm()
+    if start_epoch < config.epochs:
+        print(
+            "compiling the training epoch (once; MJX on 2 CPU cores takes minutes, native "
+            "physics seconds), then epoch 1 ...",
+            file=out,
+            flush=True,
+        )
     try:
         for epoch in range(start_epoch + 1, config.epochs + 1):
             t0 = time.perf_counter()
