@@ -10,7 +10,8 @@ import sys
 
 from mjx_hands import xla_flags
 
-# Before JAX starts a backend: MJX physics on CPU is ~4x faster with it (see xla_flags).
+# Before JAX starts a backend: the MJX physics step on 2 CPU cores ran 5.8x faster with
+# it at 128 envs (benchmarks/RESULTS.md, "Cost drivers by pipeline stage"; xla_flags).
 xla_flags.configure_cpu_codegen()
 
 

@@ -6,7 +6,7 @@ servos whose set-points span each joint's range.
 
 Target: a second Shadow hand built from **mocap bodies** -- one per rigid link,
 posed per episode by the environment from forward kinematics of the requested
-finger angles (:class:`TargetKinematics`). It adds no degree of freedom and no
+finger angles (:func:`target_poses`, from ``hand_kinematics``). It adds no degree of freedom and no
 constraint row except its contacts with the agent.
 
 What was changed from the stock hand model, and why (each item removes solver work):

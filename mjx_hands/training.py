@@ -318,10 +318,10 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
     return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
 
 
-# Settings a resumed run must share with its checkpoint: they fix the task, the
-# networks' and buffers' shapes. Everything else (learning rates, budget) may change.
 BEST_DIR = "best"  # run_dir/best: the learner of the best evaluation, for evaluate --best
 
+# Settings a resumed run must share with its checkpoint: they fix the task, the physics,
+# the networks' and buffers' shapes. Everything else (learning rates, budget) may change.
 RESUME_FIXED = (
     "task",
     "reward",
