@@ -48,3 +48,14 @@ def native_handshake_env():
 
     env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic", physics="native")
     return env, jax.jit(env.reset), jax.jit(env.step)
+
+
+# Tests that compile MJX, train for several epochs or start subprocesses that do: the
+# full suite runs them; `pytest -m "not slow"` leaves them out for the inner loop.
+SLOW_FIXTURES = {"handshake_env", "hand_run", "trained_point_reach"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)

@@ -33,6 +33,7 @@ def test_ring_buffer_full_insert_keeps_the_newest_capacity_transitions():
     assert ids[int(buffer.position) - 1] == 319
 
 
+@pytest.mark.slow
 def test_throughput_quick_mode_runs_mjx_and_native_on_the_same_sequence(tmp_path):
     """--quick keeps benchmarks/throughput.py working in CI, and what it compares is
     comparable: from the same starts under the same set-points, MJX (float32) and

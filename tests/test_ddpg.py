@@ -218,6 +218,7 @@ TWO_DEVICE_SCRIPT = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_two_cpu_devices_train_in_step(tmp_path):
     env = dict(
         os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu"
@@ -236,6 +237,7 @@ def test_two_cpu_devices_train_in_step(tmp_path):
     assert "EVAL" in result.stdout
 
 
+@pytest.mark.slow
 def test_batch_norm_option_learns_and_keeps_running_statistics():
     config = dataclasses.replace(POINT_CONFIG, batch_norm=True)
     algo = DDPG(make_point_reach(32), config, episode_length=20)

@@ -166,6 +166,7 @@ def test_native_batch_restarts_its_episodes_and_isolates_a_diverged_env(
     assert np.all(np.asarray(after.info["episode"].step)[np.arange(64) != 3] == 1)
 
 
+@pytest.mark.slow
 def test_native_episode_end_restarts_every_env(native_handshake_env):
     from mjx_hands import env as env_lib
 
@@ -214,6 +215,7 @@ def test_native_starts_have_the_hands_apart(native_handshake_env):
     np.testing.assert_allclose(got, depth, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once(tmp_path):
     """DDPG on the hand task with native physics: 2 + 2 epochs equal 4 (parameters and
     replay), and each run traced its epoch once."""
@@ -273,6 +275,7 @@ print("SUMMARY", json.dumps({"epochs": summary["epochs"]}))
 """
 
 
+@pytest.mark.slow
 def test_native_physics_trains_on_two_cpu_devices(tmp_path):
     """pmap over 2 CPU devices: each device's share of the batch goes through the same
     native physics (one rollout at a time) and training runs."""

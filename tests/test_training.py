@@ -68,6 +68,7 @@ def _learner(run_dir: Path) -> dict:
     return tree
 
 
+@pytest.mark.slow
 def test_resume_equals_an_uninterrupted_run(tmp_path):
     full = training.run(_config(tmp_path / "full"), out=io.StringIO(), env_factory=point_factory)
     assert full["epochs"] == 4 and full["last_checkpoint"] == 4
@@ -156,6 +157,7 @@ def test_existing_run_is_not_overwritten_without_resume(tmp_path):
         )
 
 
+@pytest.mark.slow
 def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
@@ -178,6 +180,7 @@ class ExplodingReach(PointReach):
         return state.replace(reward=state.reward * jnp.nan)
 
 
+@pytest.mark.slow
 def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
@@ -413,6 +416,7 @@ def test_evaluate_names_a_missing_run():
 
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
+@pytest.mark.slow
 def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
     run_dir = tmp_path / algo
     config = _config(
@@ -489,6 +493,7 @@ def test_invalid_ddpg_sizes_are_refused():
         DDPGConfig(updates_per_iteration=0)
 
 
+@pytest.mark.slow
 def test_resume_uses_the_checkpoints_own_replay_setting(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
