@@ -18,7 +18,6 @@ import functools
 import json
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import jax
@@ -72,7 +71,12 @@ def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomizatio
     return BraxTrainingEnv(env, num_envs=None)
 
 
-def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+    """Train Brax's SAC or PPO (``config.algo``) on the task; the run directory holds
+    config.json, metrics.csv, success.png and the parameters (no checkpoint to resume).
+
+    ``env_factory``: see :func:`mjx_hands.training.make_learner`.
+    """
     from brax.io import model as brax_model
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as ppo
@@ -82,6 +86,18 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
     from mjx_hands import training
     from mjx_hands.evaluate import rollout
 
+    run_dir = training.run_directory(config)
+    if config.algo not in ("sac", "ppo"):
+        raise ValueError(f"brax_agents.run trains sac or ppo, not {config.algo!r}")
+    if config.resume:
+        raise ValueError(
+            f"--resume continues DDPG runs only: --algo {config.algo} (Brax's trainer) "
+            "keeps no checkpoint to continue from; start it in a new --run-dir"
+        )
+    if (run_dir / "config.json").exists() or (run_dir / "metrics.csv").exists():
+        raise FileExistsError(
+            f"{run_dir} already holds a run; choose another --run-dir for --algo {config.algo}"
+        )
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.json").write_text(json.dumps(training.config_to_json(config), indent=2))
     _, _, single = (env_factory or training.make_envs)(config, 1)
@@ -94,14 +110,14 @@ def run(config, run_dir: Path, out=sys.stdout, env_factory=None) -> dict[str, An
     started = time.perf_counter()
 
     def progress(steps: int, metrics: dict[str, Any]) -> None:
-        row = {"train/env_steps": float(steps), "time/seconds": time.perf_counter() - started}
+        row = {"train/env_steps": float(steps), "time/wall_seconds": time.perf_counter() - started}
         row |= {k: float(np.asarray(v)) for k, v in metrics.items() if np.ndim(v) == 0}
         row["epoch"] = float(len(log.rows) + 1)
         log.append(row)
         reward = row.get("eval/episode_reward", float("nan"))
         print(
             f"{config.algo} {steps:>10,d} steps  eval return {reward:8.2f}  "
-            f"{row['time/seconds']:.0f} s",
+            f"{row['time/wall_seconds']:.0f} s",
             file=out,
             flush=True,
         )

@@ -89,9 +89,9 @@ def restore_run(
     algo, single = training.make_learner(config, devices=devices)
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
     if meta.get("contents") == "policy":
-        like_tree = training._policy_tree(like)
+        like_tree = training.policy_tree(like)
     else:
-        like_tree = training._checkpoint_tree(like, config.save_replay)
+        like_tree = training.checkpoint_tree(like, config.save_replay)
     tree, _ = checkpoint.restore(ckpt_dir, like_tree, step)
     return algo, tree, config, single
 

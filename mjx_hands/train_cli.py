@@ -57,7 +57,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         default = default_config(argv)
         config = tyro.cli(training.TrainConfig, default=default, args=argv, description=USAGE)
-        summary = training.run(config)
+        if config.algo == "ddpg":
+            summary = training.run(config)
+        else:
+            from mjx_hands import brax_agents
+
+            summary = brax_agents.run(config)
     except training.TrainingDiverged as err:
         print(f"error: {err}", file=sys.stderr)
         return 3

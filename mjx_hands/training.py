@@ -260,7 +260,7 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
 
 
 # ----------------------------------------------------------------- run
-def _checkpoint_tree(state: TrainerState, save_replay: bool) -> dict[str, Any]:
+def checkpoint_tree(state: TrainerState, save_replay: bool) -> dict[str, Any]:
     tree = {
         "learner": jax.tree.map(_first_device, state.learner),
         "env_state": state.env_state,
@@ -273,7 +273,7 @@ def _checkpoint_tree(state: TrainerState, save_replay: bool) -> dict[str, Any]:
     return tree
 
 
-def _policy_tree(state: TrainerState) -> dict[str, Any]:
+def policy_tree(state: TrainerState) -> dict[str, Any]:
     """What a policy needs (the learner: networks, targets, normaliser); no env or buffer."""
     return {"learner": jax.tree.map(_first_device, state.learner)}
 
@@ -373,28 +373,29 @@ class TrainingDiverged(RuntimeError):
     """Losses or parameters became NaN/inf; the last good checkpoint is kept."""
 
 
-def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]:
-    """Train according to ``config``; returns a summary (final metrics, paths).
-
-    ``env_factory``: see :func:`make_learner` (default: the hand environment).
-    """
-    launched = time.perf_counter()  # wall clock from here includes the compiles
-    run_dir = Path(
+def run_directory(config: TrainConfig) -> Path:
+    """``--run-dir``, or runs/<task>-<algo>-<time> when none is given."""
+    return Path(
         config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
     )
+
+
+def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+    """Train DDPG according to ``config``; returns a summary (final metrics, paths).
+
+    ``env_factory``: see :func:`make_learner` (default: the hand environment). Brax's
+    SAC and PPO run through :func:`mjx_hands.brax_agents.run` (train.py picks).
+    """
+    if config.algo != "ddpg":
+        raise ValueError(
+            f"training.run trains DDPG; --algo {config.algo} runs through "
+            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
+        )
+    launched = time.perf_counter()  # wall clock from here includes the compiles
+    run_dir = run_directory(config)
     ckpt_dir = run_dir / "checkpoints"
     best_dir = run_dir / BEST_DIR
     config_path = run_dir / "config.json"
-    if config.algo != "ddpg":
-        if config.resume:
-            raise ValueError(
-                f"--resume continues DDPG runs only: --algo {config.algo} (Brax's trainer) "
-                "keeps no checkpoint to continue from; start it in a new --run-dir"
-            )
-        if config_path.exists() or (run_dir / "metrics.csv").exists():
-            raise FileExistsError(
-                f"{run_dir} already holds a run; choose another --run-dir for --algo {config.algo}"
-            )
     if config.resume:
         if not config_path.is_file():
             raise FileNotFoundError(
@@ -405,11 +406,6 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
         raise FileExistsError(
             f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir"
         )
-    if config.algo != "ddpg":
-        from mjx_hands import brax_agents
-
-        return brax_agents.run(config, run_dir, out=out, env_factory=env_factory)
-
     run_dir.mkdir(parents=True, exist_ok=True)
     print(f"building the {config.task} environment and learner ...", file=out, flush=True)
     algo, single = make_learner(config, env_factory=env_factory)
@@ -429,7 +425,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     if config.resume and checkpoint.latest_step(ckpt_dir) is not None:
         # The checkpoint's own setting says whether it holds the replay buffer.
         saved_replay = checkpoint.read_metadata(ckpt_dir)["config"]["save_replay"]
-        tree, meta = checkpoint.restore(ckpt_dir, _checkpoint_tree(state, saved_replay))
+        tree, meta = checkpoint.restore(ckpt_dir, checkpoint_tree(state, saved_replay))
         state = _from_checkpoint_tree(tree, state, algo)
         start_epoch = int(meta["epoch"])
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
@@ -450,7 +446,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
     def save(epoch: int) -> None:
         nonlocal last_saved
         meta = {"epoch": epoch, "config": config_to_json(config), "num_devices": algo.num_devices}
-        checkpoint.save(ckpt_dir, epoch, _checkpoint_tree(state, config.save_replay), meta)
+        checkpoint.save(ckpt_dir, epoch, checkpoint_tree(state, config.save_replay), meta)
         last_saved = epoch
 
     def save_if_best(epoch: int, row: dict[str, float]) -> None:
@@ -467,7 +463,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
             "contents": "policy",
             "eval": evals,
         }
-        checkpoint.save(best_dir, epoch, _policy_tree(state), meta, max_to_keep=1)
+        checkpoint.save(best_dir, epoch, policy_tree(state), meta, max_to_keep=1)
         best = row
 
     previous_sigterm = _interrupt_on_sigterm()

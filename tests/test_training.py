@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjx_hands import checkpoint, training
+from mjx_hands import brax_agents, checkpoint, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
 from mjx_hands.point_reach import PointReach
@@ -63,7 +63,7 @@ def _learner(run_dir: Path) -> dict:
     algo, _ = training.make_learner(config, env_factory=point_factory)
     state = algo.init(jax.random.PRNGKey(0))
     tree, _ = checkpoint.restore(
-        run_dir / "checkpoints", training._checkpoint_tree(state, config.save_replay)
+        run_dir / "checkpoints", training.checkpoint_tree(state, config.save_replay)
     )
     return tree
 
@@ -136,7 +136,7 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     meta = checkpoint.read_metadata(run_dir / "best")
     assert meta["contents"] == "policy" and meta["eval"]["eval/success"] == best_row["eval/success"]
     algo, _ = training.make_learner(training.config_from_json(meta["config"]), env_factory=point_factory)
-    like = training._policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
+    like = training.policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
     tree, _ = checkpoint.restore(run_dir / "best", like)
     assert set(tree) == {"learner"}  # no env state, no replay buffer
     assert int(tree["learner"].updates) == best_row["train/updates"]
@@ -165,7 +165,7 @@ def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     )
     config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
     algo, _ = training.make_learner(config, env_factory=point_factory)
-    like = training._checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
+    like = training.checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
     with pytest.raises(
         checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"
     ):
@@ -426,7 +426,7 @@ def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
         eval_every=2,
         ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000),
     )
-    summary = training.run(config, out=io.StringIO(), env_factory=point_factory)
+    summary = brax_agents.run(config, out=io.StringIO(), env_factory=point_factory)
     assert 0.0 <= summary["final_eval"]["eval/success"] <= 1.0
     assert np.isfinite(summary["final_eval"]["eval/episode_return"])
     assert (run_dir / "brax_params.pkl").stat().st_size > 0
@@ -528,5 +528,7 @@ def test_brax_trainers_refuse_a_run_directory_that_holds_a_run(tmp_path):
     run_dir.mkdir()
     (run_dir / "metrics.csv").write_text("epoch\n1\n")
     with pytest.raises(FileExistsError, match="choose another --run-dir for --algo ppo"):
-        training.run(_config(run_dir, algo="ppo"), out=io.StringIO(), env_factory=point_factory)
+        brax_agents.run(_config(run_dir, algo="ppo"), out=io.StringIO(), env_factory=point_factory)
+    with pytest.raises(ValueError, match="runs through mjx_hands.brax_agents.run"):
+        training.run(_config(tmp_path / "other", algo="ppo"), out=io.StringIO())
     assert (run_dir / "metrics.csv").read_text() == "epoch\n1\n"
