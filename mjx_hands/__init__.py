@@ -28,8 +28,9 @@ def _import_mjx_quietly() -> None:
 
 _import_mjx_quietly()
 
+from mjx_hands.tasks import TASKS
+
 __all__ = ["TASKS", "make_env"]
-TASKS = ("handshake", "handclap", "et")
 
 
 def make_env(*args, **kwargs):

@@ -49,21 +49,10 @@ import numpy as np
 from brax.envs.base import Env, State
 from flax import struct
 
-from mjx_hands import ik, mocap, physics, reward_params, rewards, scene, spatial
+from mjx_hands import ik, mocap, physics, reward_params, rewards, scene, spatial, tasks
 from mjx_hands import shadow_hand as sh
 
-TASKS = ("handshake", "handclap", "et")
-EPISODE_LENGTH = {"handshake": 100, "handclap": 75, "et": 75}
-
-# Agent palm orientation at the demonstrated contact, per task: columns are the palm
-# body's x (thumb side), y (back of the hand) and z (fingers) axes in the world. The
-# agent stands at the origin facing +x; at zero arm angles its palm faces +y with
-# the thumb up (the handshake and clap pose); for E.T. the palm faces down.
-AGENT_CONTACT_ROTATIONS = {
-    "handshake": np.array([[0, 0, 1], [0, -1, 0], [1, 0, 0]], np.float64),
-    "handclap": np.array([[0, 0, 1], [0, -1, 0], [1, 0, 0]], np.float64),
-    "et": np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], np.float64),
-}
+TASKS = tasks.TASKS
 
 
 # IK starting posture (arm joints, then WRJ1, WRJ0): elbow bent, away from the
@@ -78,7 +67,7 @@ def place_target(
 
     The demonstrations say where the actor's palm is relative to the target palm at
     the closest approach t_min. Averaged over the task's demonstrations, that pose is
-    mapped onto a comfortable agent palm pose (``AGENT_CONTACT_ROTATIONS`` at
+    mapped onto a comfortable agent palm pose (the task's ``contact_rotation`` at
     ``contact_point``); the inverse of that map places the target.
 
     Returns:
@@ -90,7 +79,7 @@ def place_target(
     u, _, vt = np.linalg.svd(actor_rot)  # chordal mean: nearest rotation to the average
     actor_rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
     actor_pos = np.asarray(params.ref_palm_pos)[demos, t_min].mean(axis=0)
-    rot = AGENT_CONTACT_ROTATIONS[task] @ actor_rot.T
+    rot = tasks.spec(task).contact_rotation_matrix @ actor_rot.T
     return np.asarray(contact_point) - rot @ actor_pos, rot
 
 
@@ -136,7 +125,7 @@ class EnvConfig:
     """'optitrack' (the authors' recordings), 'synthetic' (mocap_data/) or 'auto'."""
     mocap_path: str | None = None
     """Folder of the demonstrations; None uses the source's default location."""
-    control_dt: float = 0.04
+    control_dt: float = tasks.CONTROL_DT
     """Control period, seconds (a multiple of the physics timestep)."""
     episode_length: int | None = None
     """Control steps per episode; None takes the paper's (100 handshake, 75 otherwise)."""
@@ -202,10 +191,9 @@ class HandInteractionEnv(Env):
     """One environment of a hand interaction task (single, unbatched)."""
 
     def __init__(self, config: EnvConfig = EnvConfig()):
-        if config.task not in TASKS:
-            raise ValueError(f"unknown task {config.task!r}; expected one of {', '.join(TASKS)}")
+        task = tasks.spec(config.task)
         self.config = config
-        self.episode_length = config.episode_length or EPISODE_LENGTH[config.task]
+        self.episode_length = config.episode_length or task.episode_length
         self.mj_model = scene.build_model(config.scene)
         self.n_substeps = round(config.control_dt / config.scene.timestep)
         if abs(self.n_substeps * config.scene.timestep - config.control_dt) > 1e-9:

@@ -48,10 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_hands import hand_kinematics, package_data
+from mjx_hands import hand_kinematics, package_data, tasks
 from mjx_hands.shadow_hand import HAND_JOINTS, HAND_POINTS
 
-TASKS = ("handshake", "handclap", "et")
+TASKS = tasks.TASKS
 """The three interactions (names used in files and configs)."""
 
 SOURCES = ("auto", "optitrack", "synthetic")

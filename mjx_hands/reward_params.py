@@ -54,12 +54,12 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from mjx_hands import shadow_hand
+from mjx_hands import shadow_hand, tasks
 
 if TYPE_CHECKING:  # mocap is only needed for the type; keep this module importable alone
     from mjx_hands.mocap import Demonstration
 
-CONTROL_DT = 0.04
+CONTROL_DT = tasks.CONTROL_DT
 """Default control period, seconds (the paper's 25 Hz policy)."""
 
 DISTANCE_FLOOR = 1e-3
@@ -74,15 +74,9 @@ N_SENSORS = len(shadow_hand.CONTACT_SENSORS)  # 15
 N_CONTROLS = len(shadow_hand.ARM_JOINTS) + N_JOINTS  # 24
 _TIPS = slice(1, N_POINTS)  # fingertip rows of a HAND_POINTS array
 
-REQUIRED_CONTACTS = {
-    "handshake": ("ff_middle", "mf_middle", "rf_middle"),
-    "handclap": (
-        "ff_proximal", "mf_proximal", "rf_proximal",
-        "ff_middle", "mf_middle", "rf_middle",
-    ),
-    "et": ("ff_distal",),
-}  # fmt: skip
-"""Contact sensors that must all touch the other hand for a task to succeed."""
+REQUIRED_CONTACTS = {name: task.required_contacts for name, task in tasks.REGISTRY.items()}
+"""Contact sensors that must all touch the other hand for a task to succeed (the task
+registry's; the evidence for each set is above)."""
 
 
 def required_contact_mask(task: str) -> np.ndarray:

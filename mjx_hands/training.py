@@ -25,10 +25,10 @@ from typing import Any, Literal
 import jax
 import numpy as np
 
-from mjx_hands import checkpoint
+from mjx_hands import checkpoint, tasks
 from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState
 
-Task = Literal["handshake", "handclap", "et"]
+Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 
 
 @dataclasses.dataclass(frozen=True)

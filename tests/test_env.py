@@ -395,3 +395,22 @@ def test_the_reward_is_given_one_way():
     assert env_lib.reward_weights(env_lib.EnvConfig(weights=mine)) == mine
     with pytest.raises(ValueError, match="give either weights or reward/imitation"):
         env_lib.reward_weights(env_lib.EnvConfig(reward="baseline2", weights=mine))
+
+
+def test_the_task_registry_is_what_every_module_reads():
+    import typing
+
+    import mjx_hands
+    from mjx_hands import mocap, reward_params, tasks, training
+
+    assert mjx_hands.TASKS == env_lib.TASKS == mocap.TASKS == tasks.TASKS
+    assert typing.get_args(training.Task) == tasks.TASKS
+    for name in tasks.TASKS:
+        spec = tasks.spec(name)
+        assert reward_params.REQUIRED_CONTACTS[name] == spec.required_contacts
+        assert all(s in sh.CONTACT_SENSORS for s in spec.required_contacts)
+        rot = spec.contact_rotation_matrix
+        np.testing.assert_allclose(rot @ rot.T, np.eye(3))
+        assert np.linalg.det(rot) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="unknown task 'wave'; expected one of handshake"):
+        tasks.spec("wave")

@@ -1,0 +1,73 @@
+"""The task registry: every per-task fact the other modules read, in one place.
+
+``TASKS`` names the interactions; :func:`spec` returns a task's :class:`TaskSpec`.
+Why each fact is what it is lives with its reader: required contacts in
+``reward_params`` (the success rule and its evidence), contact rotations in
+``env.place_target``, episode lengths and the control period in the paper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+CONTROL_DT = 0.04
+"""The paper's control period, seconds (every task's)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """One interaction's fixed facts."""
+
+    name: str
+    episode_length: int
+    """Control steps per episode (the paper's: 100 handshake, 75 otherwise)."""
+    required_contacts: tuple[str, ...]
+    """Contact sensors (``shadow_hand.CONTACT_SENSORS`` names) that must all touch the
+    other hand for the episode to succeed."""
+    contact_rotation: tuple[tuple[float, ...], ...]
+    """Agent palm orientation at the demonstrated contact (3, 3): columns are the palm
+    body's x (thumb side), y (back of the hand) and z (fingers) axes in the world. The
+    agent stands at the origin facing +x; at zero arm angles its palm faces +y with the
+    thumb up (the handshake and clap pose); for E.T. the palm faces down."""
+    control_dt: float = CONTROL_DT
+    """Control period, seconds."""
+
+    @property
+    def contact_rotation_matrix(self) -> np.ndarray:
+        return np.array(self.contact_rotation, np.float64)
+
+
+_HANDSHAKE_ROTATION = ((0, 0, 1), (0, -1, 0), (1, 0, 0))
+REGISTRY = {
+    "handshake": TaskSpec(
+        name="handshake",
+        episode_length=100,
+        required_contacts=("ff_middle", "mf_middle", "rf_middle"),
+        contact_rotation=_HANDSHAKE_ROTATION,
+    ),
+    "handclap": TaskSpec(
+        name="handclap",
+        episode_length=75,
+        required_contacts=(
+            "ff_proximal", "mf_proximal", "rf_proximal", "ff_middle", "mf_middle", "rf_middle",
+        ),
+        contact_rotation=_HANDSHAKE_ROTATION,
+    ),
+    "et": TaskSpec(
+        name="et",
+        episode_length=75,
+        required_contacts=("ff_distal",),
+        contact_rotation=((0, 0, 1), (1, 0, 0), (0, 1, 0)),
+    ),
+}  # fmt: skip
+TASKS = tuple(REGISTRY)
+
+
+def spec(task: str) -> TaskSpec:
+    """The registered facts of ``task``; a clear error for an unknown name."""
+    try:
+        return REGISTRY[task]
+    except KeyError:
+        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}") from None
