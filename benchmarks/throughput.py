@@ -28,6 +28,7 @@ import numpy as np
 from mujoco import mjx, rollout
 
 from mjx_hands import env as env_lib
+from mjx_hands import physics
 
 
 def _time_loop(step, carry, actions):
@@ -189,11 +190,7 @@ def measure_native(env: env_lib.HandInteractionEnv, data, actions, nthread: int)
     control = np.concatenate(
         [ctrl, np.broadcast_to(mocap[:, None], (batch, ctrl.shape[1], mocap.shape[1]))], axis=2
     )
-    control_spec = int(
-        mujoco.mjtState.mjSTATE_CTRL
-        | mujoco.mjtState.mjSTATE_MOCAP_POS
-        | mujoco.mjtState.mjSTATE_MOCAP_QUAT
-    )
+    control_spec = physics.NATIVE_CONTROL_SPEC
     datas = [mujoco.MjData(m) for _ in range(nthread)]
     with rollout.Rollout(nthread=nthread) as r:
         r.rollout(m, datas, states, control[:, :1], control_spec=control_spec)  # warm-up

@@ -44,6 +44,11 @@ from mjx_hands import scene
 from mjx_hands import shadow_hand as sh
 
 PHYSICS = ("mjx", "native")
+NATIVE_CONTROL_SPEC = int(
+    mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+)
+"""What ``mujoco.rollout`` takes per step beside the state: set-points and the target
+hand's mocap poses (the full-physics state has no mocap bodies)."""
 
 
 @struct.dataclass
@@ -204,11 +209,6 @@ class NativePhysics:
         self._pool = mujoco.rollout.Rollout(nthread=self.threads if self.threads > 1 else 0)
         self._lock = threading.Lock()  # one rollout at a time (several devices may call)
         self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        self._control_spec = (
-            mujoco.mjtState.mjSTATE_CTRL
-            | mujoco.mjtState.mjSTATE_MOCAP_POS
-            | mujoco.mjtState.mjSTATE_MOCAP_QUAT
-        )
         if mujoco.mj_stateSize(m, self._state_spec) != 1 + m.nq + m.nv:
             raise ValueError("NativePhysics expects a model without activations, history or plugins")
 
@@ -290,7 +290,7 @@ class NativePhysics:
                 self._datas,
                 initial,
                 control,
-                control_spec=int(self._control_spec),
+                control_spec=NATIVE_CONTROL_SPEC,
                 nstep=nstep,
                 initial_warmstart=np.zeros((batch, m.nv)),
             )
