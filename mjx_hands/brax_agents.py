@@ -178,7 +178,12 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()
     training.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
-    print(f"{config.algo}: success {final['eval/success']:.2f}", file=out, flush=True)
+    print(
+        f"{config.algo}: success at the end {final['eval/success_final']:.2f} "
+        f"(some step {final['eval/success']:.2f})",
+        file=out,
+        flush=True,
+    )
     return {
         "run_dir": str(run_dir),
         "stop_reason": "epochs",
@@ -186,4 +191,5 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
         "last_checkpoint": None,
         "final_eval": final,
         "best_eval_success": final["eval/success"],
+        "best_eval_success_final": final["eval/success_final"],
     }

@@ -169,6 +169,11 @@ class EnvConfig:
     """Physics settings."""
 
 
+POSE_METRICS = ("palm_goal_distance", "fingertip_goal_distance")
+"""``metrics['pose/<name>']`` of every step: distance (metres) of the palm centre and the
+mean distance of the five fingertips to their goals, the demonstrated final pose."""
+
+
 @struct.dataclass
 class EpisodeInfo:
     """Per-episode constants and counters kept in ``State.info['episode']``.
@@ -204,12 +209,14 @@ class HandInteractionEnv(Env):
         self.physics = physics.make_physics(
             config.physics, self.mj_model, self.n_substeps, config.contact_distance
         )
-        self.weights = reward_weights(config)
-        weights = self.weights
         self.demos = mocap.load_demonstrations(
             config.task, source=config.mocap_source, path=config.mocap_path
         )
-        self.params = reward_params.build_task_params(self.demos, weights, config.control_dt)
+        self.params = reward_params.build_task_params(
+            self.demos, reward_weights(config), config.control_dt
+        )
+        self.variant = reward_params.variant_weights(self.params)
+        """The reward variant of ``config``; reset puts it in ``info['reward_weights']``."""
         self._init_static_indices()
         self._init_target_tables()
 
@@ -256,6 +263,13 @@ class HandInteractionEnv(Env):
         self.target_center = jnp.asarray(center, jnp.float32)
         self.target_rot = jnp.asarray(rot, jnp.float32)
         self.target_quat = jnp.asarray(_rot_to_quat(rot), jnp.float32)
+
+    def variant_for(self, weights: reward_params.RewardWeights) -> reward_params.VariantWeights:
+        """The reward variant ``weights`` as the arrays ``info['reward_weights']`` holds:
+        an episode whose state carries them is rewarded by that variant (the population
+        trainer gives each member its own)."""
+        params = reward_params.build_task_params(self.demos, weights, self.config.control_dt)
+        return reward_params.variant_weights(params)
 
     # ----------------------------------------------------------- Brax Env API
     @property
@@ -340,13 +354,19 @@ class HandInteractionEnv(Env):
         terms = {k: zero for k in rewards.TERMS + ("total",)}
         metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
         metrics |= {f"contact/{name}": zero for name in sh.CONTACT_SENSORS}
+        metrics |= {f"pose/{name}": zero for name in POSE_METRICS}
         return State(
             pipeline_state=data,
             obs=self._observation(features, episode),
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"episode": episode, "truncation": zero, "success": zero},
+            info={
+                "episode": episode,
+                "truncation": zero,
+                "success": zero,
+                "reward_weights": self.variant,
+            },
         )
 
     def _start_qpos(
@@ -443,7 +463,8 @@ class HandInteractionEnv(Env):
         episode = episode.replace(step=episode.step + 1)
         features = self._features(readings, episode)
 
-        p = jax.tree.map(lambda x: x[episode.demo], self.params)
+        params = reward_params.with_variant(self.params, state.info["reward_weights"])
+        p = jax.tree.map(lambda x: x[episode.demo], params)
         terms = rewards.compute_rewards(
             p,
             episode.start_step + episode.step,
@@ -475,6 +496,13 @@ class HandInteractionEnv(Env):
             f"contact/{name}": jnp.where(finite, features["contacts"][i], 0.0)
             for i, name in enumerate(sh.CONTACT_SENSORS)
         }
+        # How far the hand is from the demonstrated final pose (unweighted, metres).
+        goal_distance = jnp.linalg.norm(episode.goal_points - features["points"], axis=-1)
+        pose = {
+            "palm_goal_distance": goal_distance[0],
+            "fingertip_goal_distance": goal_distance[1:].mean(),
+        }
+        metrics |= {f"pose/{k}": jnp.where(finite, v, 0.0) for k, v in pose.items()}
         info = dict(state.info)
         info.update(
             episode=episode,
@@ -541,6 +569,9 @@ class BatchedEnv(Env):
     Episodes have a fixed length and start together, so they end together: the
     (comparatively costly) reset with its IK runs under ``lax.cond`` only on steps
     where at least one environment finished.
+
+    Entries of ``info`` other than ``episode`` (e.g. ``reward_weights``) persist across
+    restarts: what a trainer put there holds for the environment's whole life.
     """
 
     def __init__(self, env: HandInteractionEnv, num_envs: int):

@@ -180,6 +180,37 @@ class RewardParams:
     required_contacts: jax.Array  # (15,) bool: sensors that define success
 
 
+@struct.dataclass
+class VariantWeights:
+    """The leaves of :class:`RewardParams` that a reward variant sets, for every demo.
+
+    Everything else in the parameters (goals, references, required contacts) is the
+    same for all variants, so a variant is just these arrays: runs of an experiment
+    grid that differ in their reward differ in data, not in the compiled program.
+    Shapes carry the leading ``n_demos`` axis of a stacked ``RewardParams``.
+    """
+
+    w_position: jax.Array  # (n_demos, 6)
+    w_angle: jax.Array  # (n_demos, 20)
+    w_contact: jax.Array  # (n_demos, 15)
+    w_action: jax.Array  # (n_demos, 24)
+    k_imitation_position: jax.Array  # (n_demos,)
+    k_imitation_angle: jax.Array  # (n_demos,)
+
+
+VARIANT_FIELDS = tuple(f.name for f in dataclasses.fields(VariantWeights))
+
+
+def variant_weights(params: RewardParams) -> VariantWeights:
+    """The variant's leaves of ``params`` (stacked or single-demo)."""
+    return VariantWeights(**{name: getattr(params, name) for name in VARIANT_FIELDS})
+
+
+def with_variant(params: RewardParams, weights: VariantWeights) -> RewardParams:
+    """``params`` with the reward variant ``weights`` (same demo axes as ``params``)."""
+    return params.replace(**{name: getattr(weights, name) for name in VARIANT_FIELDS})
+
+
 def _check_demo(demo: Demonstration) -> None:
     """Raise ValueError if ``demo`` cannot feed Algorithm 1."""
     name = getattr(demo, "name", "?")

@@ -18,7 +18,7 @@ Orbax checkpoints and success.png. ``python -m mjx_hands.evaluate RUN_DIR`` (ins
 mjx-hands-evaluate) reloads the policy and renders a video."""
 
 
-def _option(argv: list[str], name: str) -> str | None:
+def option(argv: list[str], name: str) -> str | None:
     """Value of ``--name V`` or ``--name=V`` in argv, read before the full parse."""
     for i, arg in enumerate(argv):
         if arg == name and i + 1 < len(argv):
@@ -36,7 +36,7 @@ def default_config(argv: list[str]):
 
     from mjx_hands import training
 
-    run_dir = _option(argv, "--run-dir") or _option(argv, "--run_dir")
+    run_dir = option(argv, "--run-dir") or option(argv, "--run_dir")
     if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
         saved = json.loads((Path(run_dir) / "config.json").read_text())
         try:
@@ -44,7 +44,7 @@ def default_config(argv: list[str]):
         except TypeError as err:  # a key this version does not know
             raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
         return dataclasses.replace(config, resume=False)
-    return training.preset(_option(argv, "--preset") or "auto")
+    return training.preset(option(argv, "--preset") or "auto")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     final = summary["final_eval"]
     print(
         f"done ({summary['stop_reason']}): {summary['epochs']} epochs, "
-        f"eval success {final.get('eval/success', float('nan')):.2f}, "
-        f"best {summary['best_eval_success']:.2f}"
+        f"eval success at the end {final.get('eval/success_final', float('nan')):.2f} "
+        f"(some step {final.get('eval/success', float('nan')):.2f}), "
+        f"best {summary.get('best_eval_success_final', float('nan')):.2f}"
         + (f" (epoch {summary['best_checkpoint']}, policy in best/)"
            if summary.get("best_checkpoint") is not None else "")
         + f"; results in {summary['run_dir']}"

@@ -26,7 +26,7 @@ import jax
 import numpy as np
 
 from mjx_hands import checkpoint, tasks
-from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState
+from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState, member, stack_members
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 
@@ -260,27 +260,31 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
 
 
 # ----------------------------------------------------------------- run
-def checkpoint_tree(state: TrainerState, save_replay: bool) -> dict[str, Any]:
+def checkpoint_tree(state: TrainerState, save_replay: bool, index: int = 0) -> dict[str, Any]:
+    """What a run's checkpoint holds: member ``index`` of the population, leaves with a
+    leading device axis (the learner replicated, so device 0's copy)."""
+    one = member(state, index)
     tree = {
-        "learner": jax.tree.map(_first_device, state.learner),
-        "env_state": state.env_state,
-        "stats": state.stats,
-        "rng": state.rng,
-        "env_steps": state.env_steps,
+        "learner": jax.tree.map(_first_device, one.learner),
+        "env_state": one.env_state,
+        "stats": one.stats,
+        "rng": one.rng,
+        "env_steps": one.env_steps,
     }
     if save_replay:
-        tree["buffer"] = state.buffer
+        tree["buffer"] = one.buffer
     return tree
 
 
-def policy_tree(state: TrainerState) -> dict[str, Any]:
+def policy_tree(state: TrainerState, index: int = 0) -> dict[str, Any]:
     """What a policy needs (the learner: networks, targets, normaliser); no env or buffer."""
-    return {"learner": jax.tree.map(_first_device, state.learner)}
+    return {"learner": jax.tree.map(_first_device, member(state, index).learner)}
 
 
-def _eval_rank(row: dict[str, float]) -> tuple[float, float, float]:
-    """Order of evaluations for the best policy: success, then success at the end, then return."""
-    return (row["eval/success"], row["eval/success_final"], row["eval/episode_return"])
+def eval_rank(row: dict[str, float]) -> tuple[float, float, float]:
+    """Order of evaluations for the best policy: success at the end of the episode (the
+    authors' metric), then success at some step, then the return."""
+    return (row["eval/success_final"], row["eval/success"], row["eval/episode_return"])
 
 
 def _first_device(x):
@@ -290,19 +294,24 @@ def _first_device(x):
     return x[0]
 
 
-def _from_checkpoint_tree(tree: dict[str, Any], fresh: TrainerState, algo: DDPG) -> TrainerState:
+def _from_checkpoint_trees(trees: list[dict[str, Any]], fresh: TrainerState, algo: DDPG):
+    """The population state of one checkpoint tree per member (see :func:`checkpoint_tree`)."""
     n = algo.num_devices
-    learner = jax.tree.map(lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"])
-    state = fresh.replace(
-        learner=learner,
-        env_state=tree["env_state"],
-        stats=tree["stats"],
-        rng=tree["rng"],
-        env_steps=tree["env_steps"],
-        buffer=tree.get("buffer", fresh.buffer),
-    )
+    members = []
+    for index, tree in enumerate(trees):
+        fresh_member = member(fresh, index)
+        members.append(
+            fresh_member.replace(
+                learner=jax.tree.map(lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"]),
+                env_state=tree["env_state"],
+                stats=tree["stats"],
+                rng=tree["rng"],
+                env_steps=tree["env_steps"],
+                buffer=tree.get("buffer", fresh_member.buffer),
+            )
+        )
     # Laid out as the epoch's outputs: any other sharding retraces (and recompiles) the epoch.
-    return algo.to_devices(state)
+    return algo.to_devices(stack_members(members))
 
 
 def config_to_json(config: TrainConfig) -> dict[str, Any]:
@@ -336,6 +345,10 @@ RESUME_FIXED = (
     "ddpg.batch_norm",
     "ddpg.replay_capacity",
 )
+
+MEMBER_FIELDS = ("seed", "reward", "imitation", "run_dir")
+"""What members of one population may differ in; every other setting is shared (one
+program): seeds, and reward variants as data."""
 
 
 def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
@@ -380,92 +393,253 @@ def run_directory(config: TrainConfig) -> Path:
     )
 
 
+class RunDirectory:
+    """One run's folder: config.json, metrics.csv + TensorBoard, checkpoints/, best/,
+    success.png. A member of a population has one like any run (``evaluate`` opens it)."""
+
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        self.path = run_directory(config)
+        self.checkpoints = self.path / "checkpoints"
+        self.best_dir = self.path / BEST_DIR
+        self.config_path = self.path / "config.json"
+        self.last_saved = 0
+        self.best: dict[str, float] | None = None
+        self.log: MetricsLog | None = None
+
+    def check(self) -> None:
+        """Refuse a resume without a run and a fresh start over an existing run."""
+        if self.config.resume:
+            if not self.config_path.is_file():
+                raise FileNotFoundError(
+                    f"--resume: no run to continue in {self.path} (config.json missing)"
+                )
+            _check_resumable(json.loads(self.config_path.read_text()), self.config, self.path)
+        elif self.config_path.exists() and checkpoint.latest_step(self.checkpoints) is not None:
+            raise FileExistsError(
+                f"{self.path} already holds a run; pass --resume to continue it or choose "
+                "another --run-dir"
+            )
+
+    def latest_epoch(self) -> int | None:
+        return checkpoint.latest_step(self.checkpoints) if self.config.resume else None
+
+    def restore(self, like: TrainerState, index: int, epoch: int) -> dict[str, Any]:
+        """Member ``index``'s checkpoint tree of ``epoch`` (shaped like ``like``'s)."""
+        # The checkpoint's own setting says whether it holds the replay buffer.
+        saved_replay = checkpoint.read_metadata(self.checkpoints, epoch)["config"]["save_replay"]
+        tree, _ = checkpoint.restore(
+            self.checkpoints, checkpoint_tree(like, saved_replay, index), epoch
+        )
+        return tree
+
+    def open(self, start_epoch: int) -> None:
+        """Write config.json (the run is known to start) and open the metrics log, keeping
+        the rows up to ``start_epoch``."""
+        self.path.mkdir(parents=True, exist_ok=True)
+        self.config_path.write_text(json.dumps(config_to_json(self.config), indent=2))
+        self.log = MetricsLog(self.path)
+        self.log.rows = [r for r in self.log.rows if r.get("epoch", 0) <= start_epoch]
+        self.best = max(
+            (r for r in self.log.rows if "eval/success" in r), key=eval_rank, default=None
+        )
+        self.last_saved = start_epoch
+
+    def wall_offset(self) -> float:
+        """Seconds a resumed run had already run (its kept rows' wall clock)."""
+        return self.log.rows[-1].get("time/wall_seconds", 0.0) if self.log.rows else 0.0
+
+    def metadata(self, epoch: int, num_devices: int) -> dict[str, Any]:
+        return {"epoch": epoch, "config": config_to_json(self.config), "num_devices": num_devices}
+
+    def save(self, state: TrainerState, index: int, epoch: int, num_devices: int) -> None:
+        tree = checkpoint_tree(state, self.config.save_replay, index)
+        checkpoint.save(self.checkpoints, epoch, tree, self.metadata(epoch, num_devices))
+        self.last_saved = epoch
+
+    def save_if_best(
+        self, state: TrainerState, index: int, epoch: int, row: dict[str, float], num_devices: int
+    ) -> None:
+        # DDPG's evaluations swing by tens of points (hand clap: 0.91 then 0.11 ten epochs
+        # later); the latest checkpoint is for resuming, this one is the policy to use.
+        if self.best is not None and eval_rank(row) <= eval_rank(self.best):
+            return
+        evals = {k: v for k, v in row.items() if k.startswith("eval/")}
+        meta = self.metadata(epoch, num_devices) | {"contents": "policy", "eval": evals}
+        checkpoint.save(self.best_dir, epoch, policy_tree(state, index), meta, max_to_keep=1)
+        self.best = row
+
+    def close(self) -> None:
+        if self.log is None:
+            return
+        self.log.close()
+        title = f"{self.config.task} ({self.config.algo}, {self.config.reward}"
+        title += ")" if self.config.imitation else ", no imitation)"
+        plot_success(self.log.rows, self.path / "success.png", title)
+
+    def summary(self, stop_reason: str, start_epoch: int) -> dict[str, Any]:
+        rows = self.log.rows if self.log is not None else []
+        evals = [r for r in rows if "eval/success" in r]
+        return {
+            "run_dir": str(self.path),
+            "stop_reason": stop_reason,
+            "epochs": int(rows[-1]["epoch"]) if rows else start_epoch,
+            "last_checkpoint": self.last_saved,
+            "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")}
+            if evals
+            else {},
+            "best_eval_success_final": max(
+                (r["eval/success_final"] for r in evals), default=float("nan")
+            ),
+            "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
+            "best_checkpoint": int(self.best["epoch"]) if self.best is not None else None,
+        }
+
+
+def _check_population(configs: list[TrainConfig]) -> None:
+    if not configs:
+        raise ValueError("a population needs at least one run config")
+    shared = lambda c: {k: v for k, v in config_to_json(c).items() if k not in MEMBER_FIELDS}
+    for config in configs[1:]:
+        a, b = shared(configs[0]), shared(config)
+        if a != b:
+            diff = sorted(k for k in a if a[k] != b[k])
+            raise ValueError(
+                f"members of a population may differ only in {', '.join(MEMBER_FIELDS)}; "
+                f"{config.run_dir} differs from {configs[0].run_dir} in {', '.join(diff)}"
+            )
+    dirs = [str(run_directory(c)) for c in configs]
+    if len(set(dirs)) != len(dirs):
+        raise ValueError(f"members need distinct run directories, got {dirs}")
+    if any(c.algo != "ddpg" for c in configs):
+        raise ValueError(
+            f"training.run trains DDPG; --algo {configs[0].algo} runs through "
+            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
+        )
+
+
+def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None:
+    """``member_info`` giving each member its reward variant as data, or None when all
+    members use the environment's own variant (``configs[0]``'s)."""
+    if all((c.reward, c.imitation) == (configs[0].reward, configs[0].imitation) for c in configs):
+        return None
+    from mjx_hands import env as env_lib
+
+    variant_for = getattr(single, "variant_for", None)
+    if variant_for is None:
+        raise ValueError(f"{type(single).__name__} has no reward variants; members differ in reward")
+    weights = [
+        variant_for(env_lib.reward_weights(env_lib.EnvConfig(reward=c.reward, imitation=c.imitation)))
+        for c in configs
+    ]
+    return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
+
+
+def _check_finite(epoch: int, metrics: list[dict[str, float]], runs: list[RunDirectory]) -> None:
+    for metrics_m, run_m in zip(metrics, runs):
+        bad = sorted(k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v))
+        if bad or metrics_m["train/params_finite"] < 1.0:
+            raise TrainingDiverged(
+                f"epoch {epoch}: training diverged (non-finite {bad or 'parameters'}) in "
+                f"{run_m.path}; the last good checkpoint (epoch {run_m.last_saved}) is in "
+                f"{run_m.checkpoints}; lower the learning rates or enable --ddpg.layer-norm "
+                "and --resume"
+            )
+
+
+def _progress_line(epoch: int, epochs: int, rate: float, rows: list[dict], labels: list[str]) -> str:
+    """One line per epoch: the run's figures, or each variant's mean over its members."""
+    line = f"epoch {epoch:4d}/{epochs}  {rate:8,.0f} steps/s  "
+    if len(rows) == 1:
+        row = rows[0]
+        if row["train/episodes"] > 0:
+            line += f"return {row['train/episode_return']:8.2f}  train success {row['train/success']:.2f}"
+        else:
+            line += "(no episode ended this epoch)"
+        if "eval/success" in row:
+            line += (
+                f"  eval success at the end {row['eval/success_final']:.2f} "
+                f"(some step {row['eval/success']:.2f})"
+            )
+        return line
+    key = "eval/success_final" if "eval/success_final" in rows[0] else "train/success"
+    groups: dict[str, list[float]] = {}
+    for label, row in zip(labels, rows):
+        groups.setdefault(label, []).append(row[key])
+    what = "eval success at the end" if key.startswith("eval") else "train success"
+    shown = "  ".join(f"{g} {np.nanmean(v):.2f}" for g, v in groups.items())
+    return line + f"{what}: {shown}"
+
+
 def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     """Train DDPG according to ``config``; returns a summary (final metrics, paths).
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment). Brax's
     SAC and PPO run through :func:`mjx_hands.brax_agents.run` (train.py picks).
     """
-    if config.algo != "ddpg":
-        raise ValueError(
-            f"training.run trains DDPG; --algo {config.algo} runs through "
-            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
-        )
+    return run_population([config], out, env_factory)[0]
+
+
+def run_population(
+    configs: list[TrainConfig],
+    out=sys.stdout,
+    env_factory=None,
+    labels: list[str] | None = None,
+) -> list[dict[str, Any]]:
+    """Train the runs ``configs`` together as one population (one compiled epoch).
+
+    The configs may differ only in ``MEMBER_FIELDS`` (seed, reward variant, imitation,
+    run directory); each member writes an ordinary run directory, and member ``i``
+    trains as ``run(configs[i])`` alone would. ``labels`` group members in the progress
+    line (e.g. by variant). Returns one summary per member.
+    """
+    _check_population(configs)
+    config = configs[0]
     launched = time.perf_counter()  # wall clock from here includes the compiles
-    run_dir = run_directory(config)
-    ckpt_dir = run_dir / "checkpoints"
-    best_dir = run_dir / BEST_DIR
-    config_path = run_dir / "config.json"
-    if config.resume:
-        if not config_path.is_file():
-            raise FileNotFoundError(
-                f"--resume: no run to continue in {run_dir} (config.json missing)"
-            )
-        _check_resumable(json.loads(config_path.read_text()), config, run_dir)
-    elif config_path.exists() and checkpoint.latest_step(ckpt_dir) is not None:
-        raise FileExistsError(
-            f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir"
-        )
-    run_dir.mkdir(parents=True, exist_ok=True)
+    runs = [RunDirectory(c) for c in configs]
+    for r in runs:
+        r.check()
+    labels = labels or [str(r.path) for r in runs]
     print(f"building the {config.task} environment and learner ...", file=out, flush=True)
-    algo, single = make_learner(config, env_factory=env_factory)
+    num_devices = len(jax.local_devices())  # this host's share of the batch
+    train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
+    algo = DDPG(
+        train_env,
+        config.ddpg,
+        episode_length=single.episode_length,
+        eval_env=eval_env,
+        members=len(configs),
+        member_info=member_variants(single, configs),
+    )
     demos = getattr(single, "demos", None)
     source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
+    where = runs[0].path if len(runs) == 1 else f"{len(runs)} runs in {runs[0].path.parent}"
     print(
         f"{config.task}: {source}, {getattr(single, 'backend', '?')} physics, "
-        f"{config.num_envs} envs on {algo.num_devices} {jax.default_backend()} device(s), "
-        f"episode {single.episode_length} steps, run dir {run_dir} "
-        f"({time.perf_counter() - launched:.0f} s)",
+        f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
+        f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
+        f"run dir {where} ({time.perf_counter() - launched:.0f} s)",
         file=out,
         flush=True,
     )
-    key = jax.random.PRNGKey(config.seed)
-    state = algo.init(key)
+    state = algo.init(np.stack([np.asarray(jax.random.PRNGKey(c.seed)) for c in configs]))
+    saved = [r.latest_epoch() for r in runs]
     start_epoch = 0
-    if config.resume and checkpoint.latest_step(ckpt_dir) is not None:
-        # The checkpoint's own setting says whether it holds the replay buffer.
-        saved_replay = checkpoint.read_metadata(ckpt_dir)["config"]["save_replay"]
-        tree, meta = checkpoint.restore(ckpt_dir, checkpoint_tree(state, saved_replay))
-        state = _from_checkpoint_tree(tree, state, algo)
-        start_epoch = int(meta["epoch"])
+    if any(s is not None for s in saved):
+        if any(s is None for s in saved):
+            missing = [str(r.path) for r, s in zip(runs, saved) if s is None]
+            raise checkpoint.CheckpointError(f"--resume: no checkpoint in {', '.join(missing)}")
+        start_epoch = min(saved)  # members save together; a kill mid-save leaves some ahead
+        trees = [r.restore(state, i, start_epoch) for i, r in enumerate(runs)]
+        state = _from_checkpoint_trees(trees, state, algo)
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
-    # Written once the run is known to start (a refused resume leaves the old one).
-    config_path.write_text(json.dumps(config_to_json(config), indent=2))
-
-    log = MetricsLog(run_dir)
-    log.rows = [r for r in log.rows if r.get("epoch", 0) <= start_epoch]
+    for r in runs:
+        r.open(start_epoch)
     # A resumed run's wall clock continues from where its kept rows end.
-    launched -= log.rows[-1].get("time/wall_seconds", 0.0) if log.rows else 0.0
+    launched -= runs[0].wall_offset()
     steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
     started = time.perf_counter()
-    last_saved = start_epoch
     stop_reason = "epochs"
-    kept_evals = [r for r in log.rows if "eval/success" in r]
-    best = max(kept_evals, key=_eval_rank, default=None)
-
-    def save(epoch: int) -> None:
-        nonlocal last_saved
-        meta = {"epoch": epoch, "config": config_to_json(config), "num_devices": algo.num_devices}
-        checkpoint.save(ckpt_dir, epoch, checkpoint_tree(state, config.save_replay), meta)
-        last_saved = epoch
-
-    def save_if_best(epoch: int, row: dict[str, float]) -> None:
-        # DDPG's evaluations swing by tens of points (hand clap: 0.91 then 0.11 ten epochs
-        # later); the latest checkpoint is for resuming, this one is the policy to use.
-        nonlocal best
-        if best is not None and _eval_rank(row) <= _eval_rank(best):
-            return
-        evals = {k: v for k, v in row.items() if k.startswith("eval/")}
-        meta = {
-            "epoch": epoch,
-            "config": config_to_json(config),
-            "num_devices": algo.num_devices,
-            "contents": "policy",
-            "eval": evals,
-        }
-        checkpoint.save(best_dir, epoch, policy_tree(state), meta, max_to_keep=1)
-        best = row
-
     previous_sigterm = _interrupt_on_sigterm()
     if start_epoch < config.epochs:
         print(
@@ -479,80 +653,59 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
             t0 = time.perf_counter()
             state, metrics = algo.run_epoch(state)
             seconds = time.perf_counter() - t0
-            losses_finite = all(
-                math.isfinite(v) for k, v in metrics.items() if k.startswith("sgd/")
-            )
-            if not losses_finite or metrics["train/params_finite"] < 1.0:
-                bad = {
-                    k: v
-                    for k, v in metrics.items()
-                    if k.startswith("sgd/") and not math.isfinite(v)
-                }
-                raise TrainingDiverged(
-                    f"epoch {epoch}: training diverged (non-finite {sorted(bad) or 'parameters'}); "
-                    f"the last good checkpoint (epoch {last_saved}) is in {ckpt_dir}; "
-                    "lower the learning rates or enable --ddpg.layer-norm and --resume"
-                )
-            row = {
+            _check_finite(epoch, metrics, runs)
+            common = {
                 "epoch": float(epoch),
                 "time/epoch_seconds": seconds,
                 "time/env_steps_per_second": steps_per_epoch / seconds,
                 "time/wall_seconds": time.perf_counter() - launched,
-            } | metrics
+            }
             peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
             if peak is not None:  # accelerators count; CPU does not
-                row["memory/device_peak_gib"] = peak / 2**30
+                common["memory/device_peak_gib"] = peak / 2**30
             # ru_maxrss is KiB on Linux.
-            row["memory/host_peak_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+            common["memory/host_peak_gib"] = (
+                resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+            )
+            rows = [common | m for m in metrics]
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
             if evaluate or out_of_time:
-                eval_key = jax.random.fold_in(jax.random.PRNGKey(config.seed + 1), epoch)
-                row |= algo.evaluate(state, eval_key)
-            log.append(row)
+                keys = np.stack(
+                    [
+                        np.asarray(jax.random.fold_in(jax.random.PRNGKey(c.seed + 1), epoch))
+                        for c in configs
+                    ]
+                )
+                rows = [row | e for row, e in zip(rows, algo.evaluate(state, keys))]
+            for r, row in zip(runs, rows):
+                r.log.append(row)
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
             if config.max_minutes is not None:  # whichever budget ends the run first
                 remaining = min(remaining, max(60 * config.max_minutes - elapsed, 0.0))
-            rate = row["time/env_steps_per_second"]
-            line = f"epoch {epoch:4d}/{config.epochs}  {rate:8,.0f} steps/s  "
-            if metrics["train/episodes"] > 0:
-                line += (
-                    f"return {metrics['train/episode_return']:8.2f}  "
-                    f"train success {metrics['train/success']:.2f}"
-                )
-            else:
-                line += "(no episode ended this epoch)"
-            if "eval/success" in row:
-                line += f"  eval success {row['eval/success']:.2f} (end {row['eval/success_final']:.2f})"
-            line += f"  left ~{remaining / 60:.0f} min"
-            print(line, file=out, flush=True)
+            line = _progress_line(epoch, config.epochs, common["time/env_steps_per_second"], rows, labels)
+            print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
             if evaluate or out_of_time:
-                save(epoch)
-                save_if_best(epoch, row)
+                for i, (r, row) in enumerate(zip(runs, rows)):
+                    r.save(state, i, epoch, algo.num_devices)
+                    r.save_if_best(state, i, epoch, row, algo.num_devices)
             if out_of_time:
                 stop_reason = "max_minutes"
                 break
     except KeyboardInterrupt:
         stop_reason = "interrupted"
-        print(f"\ninterrupted; the last checkpoint (epoch {last_saved}) is in {ckpt_dir}", file=out)
+        where = runs[0].checkpoints if len(runs) == 1 else "each run's checkpoints/"
+        print(
+            f"\ninterrupted; the last checkpoint (epoch {runs[0].last_saved}) is in {where}",
+            file=out,
+        )
     finally:
         if previous_sigterm is not None:
             signal.signal(signal.SIGTERM, previous_sigterm)
-        log.close()
-        plot_success(
-            log.rows, run_dir / "success.png", f"{config.task} ({config.algo}, {config.reward})"
-        )
-    evals = [r for r in log.rows if "eval/success" in r]
-    return {
-        "run_dir": str(run_dir),
-        "stop_reason": stop_reason,
-        "epochs": int(log.rows[-1]["epoch"]) if log.rows else start_epoch,
-        "last_checkpoint": last_saved,
-        "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")}
-        if evals
-        else {},
-        "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
-        "best_checkpoint": int(best["epoch"]) if best is not None else None,
-        "epoch_compilations": algo.trace_count,  # 1 unless something forced a retrace
-    }
+        for r in runs:
+            r.close()
+    return [
+        r.summary(stop_reason, start_epoch) | {"epoch_compilations": algo.trace_count}
+        for r in runs
+    ]

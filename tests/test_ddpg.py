@@ -97,7 +97,7 @@ def test_collected_transitions_bootstrap_truncation_but_not_termination():
     n, length = 6, 4
     env = make_point_reach(n, episode_length=length, terminate_on_success=True)
     algo = DDPG(env, POINT_CONFIG, episode_length=length)
-    learner = jax.tree.map(lambda x: x[0], algo.init(jax.random.PRNGKey(0)).learner)
+    learner = jax.tree.map(lambda x: x[0], algo.init(jax.random.PRNGKey(0)).learner)  # (1, ...)
     state = env.reset(jax.random.PRNGKey(1))
     episode = state.info["episode"]
     # Envs 0-1: one step from the goal (terminate); 2-3: at their last step (truncate);
@@ -116,8 +116,12 @@ def test_collected_transitions_bootstrap_truncation_but_not_termination():
     # A deterministic action towards the goal (replace the explorer for this check).
     toward = jnp.clip((episode.goal - state.pipeline_state) / 0.2, -1, 1)
     algo._explore = lambda learner, obs, rng: toward
+    one_member = lambda tree: jax.tree.map(lambda x: x[None], tree)  # a population of one
     (next_state, _), (transition, finished) = jax.jit(algo._env_step)(
-        learner, (state, stats), jax.random.PRNGKey(2)
+        learner, (one_member(state), stats), jax.random.PRNGKey(2)[None]
+    )
+    next_state, transition, finished = jax.tree.map(
+        lambda x: x[0], (next_state, transition, finished)
     )
     np.testing.assert_array_equal(transition.discount, [0, 0, 1, 1, 1, 1])
     np.testing.assert_array_equal(finished["done"], [1, 1, 1, 1, 0, 0])
@@ -147,7 +151,7 @@ def trained_point_reach():
     history = []
     for _ in range(12):
         state, metrics = algo.run_epoch(state)
-        history.append(metrics)
+        history.append(metrics[0])
     return algo, state, history
 
 
@@ -161,12 +165,12 @@ def test_ddpg_solves_point_reaching(trained_point_reach):
         key,
     )
     idle = _episode_return(env, lambda s: jnp.zeros((256, 2)), key)
-    learner = jax.tree.map(lambda x: x[0], state.learner)
+    learner = jax.tree.map(lambda x: x[0, 0], state.learner)
     learned = _episode_return(env, lambda s: algo.policy(learner, s.obs), key)
     # Stated target: within 1.0 of the straight-to-goal oracle (idle is ~4x worse).
     assert idle < oracle - 10.0
     assert learned > oracle - 1.0, (learned, oracle, idle)
-    evaluation = algo.evaluate(state, jax.random.PRNGKey(3))
+    (evaluation,) = algo.evaluate(state, jax.random.PRNGKey(3))
     assert evaluation["eval/success"] > 0.9
     assert history[-1]["train/updates"] == 12 * 20 * 10 - 3 * 10  # 3 warm-up iterations
     assert all(np.isfinite(m["sgd/critic_loss"]) for m in history)
@@ -208,11 +212,11 @@ TWO_DEVICE_SCRIPT = textwrap.dedent(
     params = jax.tree.leaves(jax.device_get(state.learner.actor_params))
     assert all(np.array_equal(p[0], p[1]) for p in params), "replicas diverged"
     sizes = np.asarray(state.buffer.size)
-    assert sizes.shape == (2,) and (sizes == sizes[0]).all()
+    assert sizes.shape == (2, 1) and (sizes == sizes[0]).all()
     obs = np.asarray(state.env_state.obs)
     assert not np.allclose(obs[0], obs[1]), "devices run identical envs"
-    result = algo.evaluate(state, jax.random.PRNGKey(3))
-    print("EVAL", result["eval/success"], result["eval/episode_return"], metrics["train/env_steps"])
+    (result,) = algo.evaluate(state, jax.random.PRNGKey(3))
+    print("EVAL", result["eval/success"], result["eval/episode_return"], metrics[0]["train/env_steps"])
     assert result["eval/success"] > 0.9, result
     """
 )
@@ -248,4 +252,4 @@ def test_batch_norm_option_learns_and_keeps_running_statistics():
     stats = jax.device_get(state.learner.critic_params["batch_stats"])
     moved = [np.abs(a - b).max() for a, b in zip(jax.tree.leaves(initial), jax.tree.leaves(stats))]
     assert min(moved) > 1e-3  # running means and variances follow the minibatches
-    assert algo.evaluate(state, jax.random.PRNGKey(3))["eval/success"] > 0.8
+    assert algo.evaluate(state, jax.random.PRNGKey(3))[0]["eval/success"] > 0.8

@@ -10,6 +10,10 @@ gradients and observation statistics are all-reduced (``axis_name='devices'``).
 Nothing crosses between host and device inside an epoch, and the trainer state is
 donated, so the buffer is updated in place.
 
+Population: the trainer holds ``members`` independent runs (an experiment grid's
+seeds and reward variants) under one more leading axis, ``vmap``-ed inside the epoch;
+their environments step together as one batch. An ordinary run is a population of one.
+
 Multi-host: call ``jax.distributed.initialize()`` before building the trainer and
 run the same program on every host. The pmap then spans all hosts' devices (each
 host feeds its local ones, with keys folded by ``jax.process_index()``) and the
@@ -25,6 +29,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import struct
 
@@ -101,7 +106,7 @@ class DDPGConfig:
 
 @struct.dataclass
 class LearnerState:
-    """Everything SGD changes; replicated over devices."""
+    """Everything SGD changes for one run; replicated over devices."""
 
     actor_params: Any
     critic_params: Any
@@ -123,24 +128,59 @@ class EpisodeStats:
 
 @struct.dataclass
 class TrainerState:
-    """The whole training state; every leaf has a leading device axis."""
+    """The whole training state of a population of independent runs (members).
+
+    Every leaf has the leading axes (devices, members): an ordinary run is a
+    population of one. ``member(state, i)`` is run ``i`` alone, laid out as a
+    population-free state with a leading device axis.
+    """
 
     learner: LearnerState
-    env_state: Any
+    env_state: Any  # per member: a batched env state of the per-device num_envs
     buffer: replay.ReplayBuffer
     stats: EpisodeStats
-    rng: jax.Array
-    env_steps: jax.Array  # () int32, this device's environment steps so far
+    rng: jax.Array  # (devices, members, 2)
+    env_steps: jax.Array  # (devices, members) int32, each device's environment steps so far
+
+
+def member(tree, index: int):
+    """Member ``index`` of a population pytree (leaves (devices, members, ...)) ->
+    leaves (devices, ...); also for abstract (``jax.eval_shape``) trees."""
+
+    def take(x):
+        if isinstance(x, jax.ShapeDtypeStruct):
+            return jax.ShapeDtypeStruct(x.shape[:1] + x.shape[2:], x.dtype)
+        return x[:, index]
+
+    return jax.tree.map(take, tree)
+
+
+def stack_members(trees: list):
+    """Inverse of :func:`member`: trees with leaves (devices, ...) -> (devices, members, ...)."""
+    return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs], axis=1), *trees)
 
 
 class DDPG:
-    """DDPG on a batched Brax-API environment (see ``mjx_hands.env.BatchedEnv``).
+    """DDPG on a batched Brax-API environment (see ``mjx_hands.env.BatchedEnv``), for a
+    population of ``members`` independent runs trained together in one compiled epoch.
+
+    Each member has its own networks, optimiser states, normaliser, replay buffer,
+    environments and keys; members share only the program. A member's keys come from
+    its own seed exactly as a run alone derives them, so member ``i`` of a population
+    trains as a population of one with its seed and reward would (the test suite checks
+    it). Environments of all members step as one batch (one physics call; on the
+    native backend one ``mujoco.rollout``), everything else is ``vmap``-ed over members.
 
     Args:
-      env: batched environment holding the *per-device* number of envs; its states
-        carry ``info['terminal_obs']``, ``info['truncation']`` and ``info['success']``.
-      eval_env: batched environment for evaluation (per-device batch); default ``env``.
+      env: batched environment holding the *per-device, per-member* number of envs; its
+        states carry ``info['terminal_obs']``, ``info['truncation']``, ``info['success']``.
+      eval_env: batched environment for evaluation (per-device, per-member batch);
+        default ``env``.
       episode_length: control steps per episode (sets γ and the evaluation length).
+      members: runs in the population.
+      member_info: entries of each member's environment ``info`` (leaves with a leading
+        ``members`` axis), e.g. ``{'reward_weights': ...}``: each member's reward variant
+        as data. None keeps what the environment's reset puts there.
     """
 
     def __init__(
@@ -151,11 +191,24 @@ class DDPG:
         episode_length: int,
         eval_env=None,
         devices: list | None = None,
+        members: int = 1,
+        member_info: dict[str, Any] | None = None,
     ):
         self.env = env
         self.eval_env = eval_env or env
         self.config = config
         self.episode_length = episode_length
+        if members < 1:
+            raise ValueError(f"a population needs at least one member, got members={members}")
+        self.members = members
+        for key, value in (member_info or {}).items():
+            for leaf in jax.tree.leaves(value):
+                if np.shape(leaf)[:1] != (members,):
+                    raise ValueError(
+                        f"member_info[{key!r}] has a leaf of shape {np.shape(leaf)}; expected a "
+                        f"leading axis of the {members} members"
+                    )
+        self.member_info = member_info
         # devices=None: every device of every host (multi-host); else exactly these.
         self._pmap_devices = devices
         self.devices = devices or jax.local_devices()
@@ -192,7 +245,7 @@ class DDPG:
         return learner.normalizer.normalize(obs, self.config.observation_clip)
 
     def policy(self, learner: LearnerState, obs: jax.Array) -> jax.Array:
-        """Deterministic action (..., act) of observations (..., obs)."""
+        """Deterministic action (..., act) of one run's learner for observations (..., obs)."""
         return self.actor.apply(learner.actor_params, self.normalize(learner, obs))
 
     def _explore(self, learner: LearnerState, obs: jax.Array, rng: jax.Array) -> jax.Array:
@@ -205,22 +258,55 @@ class DDPG:
         pick = jax.random.uniform(k_pick, action.shape[:-1] + (1,)) < self.config.random_action_prob
         return jnp.where(pick, random, action)
 
+    # ---------------------------------------------------------- environments
+    def _reset_members(self, env, keys: jax.Array):
+        """Each member's batch of fresh episodes: keys (members, 2) -> leaves (members, n, ...)."""
+        state = jax.vmap(env.reset)(keys)
+        if self.member_info is None:
+            return state
+        info = dict(state.info)
+        for key, value in self.member_info.items():
+            info[key] = jax.tree.map(
+                lambda mine, like: jnp.broadcast_to(
+                    jnp.asarray(mine, like.dtype)[:, None], like.shape
+                ),
+                value,
+                state.info[key],
+            )
+        return state.replace(info=info)
+
+    @staticmethod
+    def _step_members(env, state, action: jax.Array):
+        """Step every member's environments as one batch (one physics call).
+
+        state leaves (members, n, ...), action (members, n, act) -> next state, same layout.
+        """
+        members, n = action.shape[:2]
+        flat = jax.tree.map(lambda x: x.reshape((members * n,) + x.shape[2:]), state)
+        stepped = env.step(flat, action.reshape((members * n,) + action.shape[2:]))
+        return jax.tree.map(lambda x: x.reshape((members, n) + x.shape[1:]), stepped)
+
     # ------------------------------------------------------------------ init
     def init(self, rng: jax.Array) -> TrainerState:
-        """A fresh trainer state from one key; leaves get a leading device axis."""
-        rng = jax.random.fold_in(rng, jax.process_index())  # distinct envs on every host
-        return self._init(jax.random.split(rng, self.num_devices))
+        """A fresh trainer state from one key per member: rng (members, 2), or (2,) for a
+        population of one. Leaves get the leading axes (devices, members)."""
+        rng = jnp.asarray(rng)
+        if rng.ndim == 1:
+            rng = rng[None]
+        if rng.shape[0] != self.members:
+            raise ValueError(f"init needs one key per member ({self.members}), got {rng.shape}")
+        # Distinct envs on every host; then one key per device, as a run alone splits them.
+        rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
+        keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
+        return self._init(jnp.swapaxes(keys, 0, 1))
 
-    def _init_device(self, rng: jax.Array) -> TrainerState:
-        # Parameters must agree across devices: derive them from a key all devices share.
-        shared = jax.random.fold_in(jax.lax.all_gather(rng, AXIS)[0], 0)
+    def _init_learner(self, shared: jax.Array) -> LearnerState:
         k_actor, k_critic = jax.random.split(shared)
-        rng, k_env = jax.random.split(rng)
         obs = jnp.zeros((1, self.env.observation_size))
         act = jnp.zeros((1, self.env.action_size))
         actor_params = self.actor.init(k_actor, obs)
         critic_params = self.critic.init(k_critic, obs, act)
-        learner = LearnerState(
+        return LearnerState(
             actor_params=actor_params,
             critic_params=critic_params,
             target_actor_params=actor_params,
@@ -230,45 +316,67 @@ class DDPG:
             normalizer=networks.Normalizer.create(self.env.observation_size),
             updates=jnp.zeros((), jnp.int32),
         )
-        env_state = self.env.reset(k_env)
+
+    def _init_device(self, rng: jax.Array) -> TrainerState:
+        """rng (members, 2): this device's key of every member."""
+        # Parameters must agree across devices: derive them from keys all devices share.
+        shared = jax.lax.all_gather(rng, AXIS)[0]
+        learner = jax.vmap(lambda k: self._init_learner(jax.random.fold_in(k, 0)))(shared)
+        keys = jax.vmap(jax.random.split)(rng)
+        rng, k_env = keys[:, 0], keys[:, 1]
+        env_state = self._reset_members(self.env, k_env)
         example = replay.Transition(
-            obs=env_state.obs[0],
+            obs=env_state.obs[0, 0],
             action=jnp.zeros(self.env.action_size),
             reward=jnp.zeros(()),
             discount=jnp.zeros(()),
-            next_obs=env_state.obs[0],
+            next_obs=env_state.obs[0, 0],
         )
         buffer = replay.create(self.config.replay_capacity // self.num_devices, example)
-        n = env_state.reward.shape[0]
-        stats = EpisodeStats(jnp.zeros(n), jnp.zeros(n))
-        return TrainerState(learner, env_state, buffer, stats, rng, jnp.zeros((), jnp.int32))
+        buffer = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.members,) + x.shape), buffer)
+        shape = env_state.reward.shape  # (members, n)
+        stats = EpisodeStats(jnp.zeros(shape), jnp.zeros(shape))
+        env_steps = jnp.zeros((self.members,), jnp.int32)
+        return TrainerState(learner, env_state, buffer, stats, rng, env_steps)
 
     # ----------------------------------------------------------------- epoch
-    def run_epoch(self, state: TrainerState) -> tuple[TrainerState, dict[str, float]]:
-        """One compiled epoch; ``state`` is donated. Returns the new state and host metrics."""
+    def run_epoch(self, state: TrainerState) -> tuple[TrainerState, list[dict[str, float]]]:
+        """One compiled epoch; ``state`` is donated. Returns the new state and each
+        member's host metrics."""
         state, metrics = self._epoch(state)
-        return state, {k: float(v[0]) for k, v in jax.device_get(metrics).items()}
+        return state, _per_member(metrics, self.members)
 
     def _epoch_device(self, state: TrainerState):
         self.trace_count += 1  # runs only while tracing: counts compilations
         cfg = self.config
+        members = self.members
 
         def iteration(state: TrainerState, _):
-            rng, k_unroll, k_sgd = jax.random.split(state.rng, 3)
+            keys = jax.vmap(lambda k: jax.random.split(k, 3))(state.rng)
+            rng, k_unroll, k_sgd = keys[:, 0], keys[:, 1], keys[:, 2]
+            step_keys = jax.vmap(lambda k: jax.random.split(k, cfg.unroll_length))(k_unroll)
             (env_state, stats), (transitions, finished) = jax.lax.scan(
                 functools.partial(self._env_step, state.learner),
                 (state.env_state, state.stats),
-                jax.random.split(k_unroll, cfg.unroll_length),
+                jnp.swapaxes(step_keys, 0, 1),
             )
-            flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), transitions)
-            buffer = replay.insert(state.buffer, flat)
+            # (steps, members, envs, ...) -> each member's (steps * envs, ...), step-major.
+            flat = jax.tree.map(
+                lambda x: jnp.swapaxes(x, 0, 1).reshape((members, -1) + x.shape[3:]), transitions
+            )
+            buffer = jax.vmap(replay.insert)(state.buffer, flat)
             learner = state.learner
             if cfg.normalize_observations:
-                learner = learner.replace(normalizer=learner.normalizer.update(flat.obs, AXIS))
-            ready = buffer.size * self.num_devices >= cfg.min_replay_size
+                normalizer = jax.vmap(lambda n, obs: n.update(obs, AXIS))(
+                    learner.normalizer, flat.obs
+                )
+                learner = learner.replace(normalizer=normalizer)
+            # Every member's buffer fills at the same pace: one unbatched predicate keeps
+            # SGD out of the warm-up (a per-member one would run both branches under vmap).
+            ready = buffer.size[0] * self.num_devices >= cfg.min_replay_size
             learner, sgd_metrics = jax.lax.cond(
                 ready,
-                lambda learner: self._train(learner, buffer, k_sgd),
+                lambda learner: jax.vmap(self._train)(learner, buffer, k_sgd),
                 lambda learner: (learner, self._zero_sgd_metrics()),
                 learner,
             )
@@ -278,42 +386,46 @@ class DDPG:
                 buffer=buffer,
                 stats=stats,
                 rng=rng,
-                env_steps=state.env_steps + flat.reward.shape[0],
+                env_steps=state.env_steps + flat.reward.shape[1],
             )
             return state, (finished, sgd_metrics)
 
         state, (finished, sgd_metrics) = jax.lax.scan(
             iteration, state, None, length=cfg.iterations_per_epoch
         )
-        episodes = jax.lax.psum(finished["done"].sum(), AXIS)
+        # finished leaves: (iterations, steps, members, envs); reduce all but members.
+        total = lambda x: jax.lax.psum(x.sum(axis=(0, 1, 3)), AXIS)
+        mean = lambda x: jax.lax.pmean(x.mean(axis=(0, 1, 3)), AXIS)
+        episodes = total(finished["done"])
         # NaN, not 0, when no episode ended this epoch (epochs shorter than an episode).
         per_episode = lambda x: jnp.where(
-            episodes > 0, jax.lax.psum(x.sum(), AXIS) / jnp.maximum(episodes, 1), jnp.nan
+            episodes > 0, total(x) / jnp.maximum(episodes, 1), jnp.nan
         )
+        learner = state.learner
         metrics = {
             "train/episodes": episodes,
             "train/episode_return": per_episode(finished["return"]),
             "train/success": per_episode(finished["success"]),
-            "train/reward_per_step": jax.lax.pmean(finished["reward"].mean(), AXIS),
+            "train/reward_per_step": mean(finished["reward"]),
             "train/env_steps": jax.lax.psum(state.env_steps, AXIS),
-            "train/updates": state.learner.updates,
+            "train/updates": learner.updates,
             "train/replay_size": jax.lax.psum(state.buffer.size, AXIS),
-            "train/params_finite": _all_finite(
-                (state.learner.actor_params, state.learner.critic_params)
+            "train/params_finite": jax.vmap(_all_finite)(
+                (learner.actor_params, learner.critic_params)
             ).astype(jnp.float32),
         }
         # Environment metrics (reward terms, ...) averaged over the epoch's steps.
-        metrics |= {
-            f"env/{k}": jax.lax.pmean(v.mean(), AXIS) for k, v in finished["env_metrics"].items()
-        }
+        metrics |= {f"env/{k}": mean(v) for k, v in finished["env_metrics"].items()}
         # SGD metrics of the epoch's last iteration (the most recent networks).
-        metrics |= {k: v[-1].mean() for k, v in sgd_metrics.items()}
+        metrics |= {k: v[-1].mean(axis=-1) for k, v in sgd_metrics.items()}
         return state, metrics
 
-    def _env_step(self, learner: LearnerState, carry, rng):
+    def _env_step(self, learner: LearnerState, carry, rng: jax.Array):
+        """One step of every member's environments. rng (members, 2); leaves of the
+        carry and of the outputs have leading axes (members, envs)."""
         env_state, stats = carry
-        action = self._explore(learner, env_state.obs, rng)
-        next_state = self.env.step(env_state, action)
+        action = jax.vmap(self._explore)(learner, env_state.obs, rng)
+        next_state = self._step_members(self.env, env_state, action)
         done, truncation = next_state.done, next_state.info["truncation"]
         transition = replay.Transition(
             obs=env_state.obs,
@@ -336,11 +448,11 @@ class DDPG:
 
     def _zero_sgd_metrics(self) -> dict[str, jax.Array]:
         keys = ("critic_loss", "q", "target_q", "actor_loss", "action_penalty")
-        zero = jnp.zeros((self.config.updates_per_iteration,))
+        zero = jnp.zeros((self.members, self.config.updates_per_iteration))
         return {f"sgd/{k}": zero for k in keys}
 
     def _train(self, learner: LearnerState, buffer: replay.ReplayBuffer, rng: jax.Array):
-        """``updates_per_iteration`` SGD updates, then a Polyak step of the targets."""
+        """``updates_per_iteration`` SGD updates, then a Polyak step of the targets (one run)."""
         per_device = self.config.batch_size // self.num_devices
 
         def update(learner: LearnerState, key):
@@ -419,37 +531,55 @@ class DDPG:
         return apply
 
     # ------------------------------------------------------------ evaluation
-    def evaluate(self, state: TrainerState, rng: jax.Array) -> dict[str, float]:
-        """Deterministic-policy episodes on ``eval_env`` (one per env and device).
+    def evaluate(self, state: TrainerState, rng: jax.Array) -> list[dict[str, float]]:
+        """Deterministic-policy episodes on ``eval_env`` (one per env and device), per member.
 
-        Returns mean episode return, ``success`` (the required contacts all touched at
-        some step) and ``success_final`` (they touch at the last step).
+        rng: one key per member (members, 2), or (2,) for a population of one. Each
+        member's metrics: mean episode return, ``success_final`` (the required contacts
+        touch at the last step: the headline), ``success`` (they all touched at some
+        step) and ``final_<name>`` for the environment's ``pose/<name>`` metrics at the
+        last step (e.g. the fingertips' distance to their goals).
         """
         return self.evaluate_learner(state.learner, rng)
 
-    def evaluate_learner(self, learner: LearnerState, rng: jax.Array) -> dict[str, float]:
-        """:meth:`evaluate` of a replicated learner (leaves with a leading device axis)."""
-        rng = jax.random.fold_in(rng, jax.process_index())
-        metrics = self._evaluate(learner, jax.random.split(rng, self.num_devices))
-        return {k: float(v[0]) for k, v in jax.device_get(metrics).items()}
+    def evaluate_learner(self, learner: LearnerState, rng: jax.Array) -> list[dict[str, float]]:
+        """:meth:`evaluate` of a replicated population learner (leaves (devices, members, ...))."""
+        rng = jnp.asarray(rng)
+        if rng.ndim == 1:
+            rng = rng[None]
+        rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
+        keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
+        metrics = self._evaluate(learner, jnp.swapaxes(keys, 0, 1))
+        return _per_member(metrics, self.members)
 
     def _evaluate_device(self, learner: LearnerState, rng: jax.Array):
         env = self.eval_env
 
         def step(env_state, _):
-            next_state = env.step(env_state, self.policy(learner, env_state.obs))
+            action = jax.vmap(self.policy)(learner, env_state.obs)
+            next_state = self._step_members(env, env_state, action)
             return next_state, (next_state.reward, next_state.info["success"])
 
-        start = env.reset(rng)
-        _, (reward, success) = jax.lax.scan(step, start, None, length=self.episode_length)
-        return jax.lax.pmean(
-            {
-                "eval/episode_return": reward.sum(axis=0).mean(),
-                "eval/success": success.max(axis=0).mean(),
-                "eval/success_final": success[-1].mean(),
-            },
-            AXIS,
-        )
+        start = self._reset_members(env, rng)
+        final, (reward, success) = jax.lax.scan(step, start, None, length=self.episode_length)
+        # reward, success: (steps, members, envs)
+        metrics = {
+            "eval/episode_return": reward.sum(axis=0).mean(axis=-1),
+            "eval/success": success.max(axis=0).mean(axis=-1),
+            "eval/success_final": success[-1].mean(axis=-1),
+        }
+        metrics |= {
+            f"eval/final_{k.removeprefix('pose/')}": v.mean(axis=-1)
+            for k, v in final.metrics.items()
+            if k.startswith("pose/")
+        }
+        return jax.lax.pmean(metrics, AXIS)
+
+
+def _per_member(metrics: dict[str, jax.Array], members: int) -> list[dict[str, float]]:
+    """Device 0's (members,) metrics -> one dict of floats per member."""
+    host = {k: np.asarray(v[0]) for k, v in jax.device_get(metrics).items()}
+    return [{k: float(v[i]) for k, v in host.items()} for i in range(members)]
 
 
 def _all_finite(tree) -> jax.Array:

@@ -1,0 +1,537 @@
+"""Experiment grids: seeds x reward variants of one task trained as one population,
+and the paper's Fig. 4 comparison reported from them.
+
+    python -m mjx_hands.experiments run --task et --seeds 5 --run-dir runs/fig4-et \\
+        --variants full baseline1 baseline2 no_imitation
+    python -m mjx_hands.experiments run --run-dir runs/fig4-et --resume
+    python -m mjx_hands.experiments report runs/fig4-* --out benchmarks/fig4
+
+(installed: ``mjx-hands-experiments``). ``run`` trains every member together in one
+compiled epoch (:func:`mjx_hands.training.run_population`); members differ only in
+their seed and reward variant (data, not program). Each member is an ordinary run
+directory, ``RUN_DIR/<variant>/seed<k>``, that ``mjx_hands.evaluate`` opens;
+``RUN_DIR/grid.json`` records the grid so that ``--resume`` continues all of it.
+Every other option is ``train.py``'s (preset, epochs, sizes, ``--ddpg.*``).
+
+``report`` reads grids (any tasks) and writes ``fig4.png`` (success at the end of the
+episode, mean +- standard error over seeds, per variant; one panel per task, against
+environment steps and wall clock), ``summary.csv``/``summary.json`` (final and best
+success per variant) and ``statements.json``/``.md``: the paper's four findings, each
+held / not held / not significant with the numbers behind it.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import tyro
+
+from mjx_hands import train_cli, training
+
+VARIANTS: dict[str, tuple[str, bool]] = {
+    "full": ("full", True),
+    "baseline1": ("baseline1", True),
+    "baseline2": ("baseline2", True),
+    "no_imitation": ("full", False),
+    "baseline1_no_imitation": ("baseline1", False),
+    "baseline2_no_imitation": ("baseline2", False),
+}
+"""Grid variant -> (``--reward``, ``--imitation``) of its runs. ``full``: the paper's
+reward r = r_p + r_alpha + r_c + r_a + r_pI + r_alphaI; ``baseline1``: palm position
+instead of fingertips; ``baseline2``: no contact term; ``no_imitation``: the full reward
+without r_pI, r_alphaI."""
+
+Variant = Literal[tuple(VARIANTS)]
+FIG4_VARIANTS = ("full", "baseline1", "baseline2", "no_imitation")
+GRID_FILE = "grid.json"
+HEADLINE = "eval/success_final"  # the authors' metric: required contacts at the last step
+ALPHA = 0.05  # two-sided significance level of the statements' tests
+HIGH_SUCCESS = 0.8  # "a high success rate" (statement 3)
+
+
+# ------------------------------------------------------------------------- run
+@dataclasses.dataclass(frozen=True)
+class GridConfig:
+    """Train seeds x reward variants of one task together (one compiled program)."""
+
+    variants: tuple[Variant, ...] = FIG4_VARIANTS
+    """Reward variants of the grid."""
+    seeds: int = 5
+    """Seeds per variant: --seed, --seed + 1, ..."""
+    train: Annotated[training.TrainConfig, tyro.conf.arg(name="")] = training.TrainConfig()
+    """Everything else, as train.py takes it."""
+
+
+def members(grid: GridConfig) -> list[tuple[str, Any]]:
+    """(variant, run config) of every member of ``grid``, variant-major."""
+    base = grid.train
+    run_dir = Path(base.run_dir)
+    out = []
+    for variant in grid.variants:
+        reward, imitation = VARIANTS[variant]
+        for seed in range(base.seed, base.seed + grid.seeds):
+            config = dataclasses.replace(
+                base,
+                reward=reward,
+                imitation=imitation,
+                seed=seed,
+                run_dir=str(run_dir / variant / f"seed{seed}"),
+            )
+            out.append((variant, config))
+    return out
+
+
+def _check_grid(grid: GridConfig) -> None:
+    base = grid.train
+    problems = []
+    if base.run_dir is None:
+        problems.append("--run-dir is required (the grid's folder)")
+    if not grid.variants:
+        problems.append("--variants needs at least one variant")
+    if len(set(grid.variants)) != len(grid.variants):
+        problems.append(f"--variants repeats a variant: {' '.join(grid.variants)}")
+    if grid.seeds < 1:
+        problems.append(f"--seeds must be positive, got {grid.seeds}")
+    if base.reward != "full" or not base.imitation:
+        problems.append("--reward/--no-imitation do not apply to a grid; name --variants instead")
+    if base.algo != "ddpg":
+        problems.append(f"grids train DDPG; --algo {base.algo} is not supported")
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
+def _grid_default(argv: list[str]) -> GridConfig:
+    """The grid the command line overrides: a resumed grid's own, else the preset's."""
+    run_dir = train_cli.option(argv, "--run-dir") or train_cli.option(argv, "--run_dir")
+    if "--resume" in argv and run_dir:
+        path = Path(run_dir) / GRID_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"--resume: no grid to continue in {run_dir} ({GRID_FILE} missing)")
+        saved = json.loads(path.read_text())
+        train = dataclasses.replace(training.config_from_json(saved["train"]), resume=False)
+        return GridConfig(variants=tuple(saved["variants"]), seeds=saved["seeds"], train=train)
+    return GridConfig(train=training.preset(train_cli.option(argv, "--preset") or "auto"))
+
+
+def run_grid(grid: GridConfig, out=sys.stdout, env_factory=None) -> list[dict[str, Any]]:
+    """Train ``grid``; returns each member's summary (with its ``variant``)."""
+    _check_grid(grid)
+    pairs = members(grid)
+    run_dir = Path(grid.train.run_dir)
+    record = {
+        "task": grid.train.task,
+        "variants": list(grid.variants),
+        "seeds": grid.seeds,
+        "members": [
+            {"variant": v, "seed": c.seed, "run_dir": str(Path(c.run_dir).relative_to(run_dir))}
+            for v, c in pairs
+        ],
+        "train": training.config_to_json(dataclasses.replace(grid.train, resume=False)),
+    }
+    if grid.train.resume:
+        saved = json.loads((run_dir / GRID_FILE).read_text())
+        if saved["members"] != record["members"]:
+            raise ValueError(
+                f"--resume: {run_dir} holds another grid ({len(saved['members'])} members of "
+                f"{', '.join(saved['variants'])}); resume it without --variants/--seeds/--seed"
+            )
+    elif (run_dir / GRID_FILE).exists():
+        raise FileExistsError(
+            f"{run_dir} already holds a grid; pass --resume to continue it or choose another --run-dir"
+        )
+    print(
+        f"grid: {grid.train.task}, {len(grid.variants)} variants x {grid.seeds} seeds = "
+        f"{len(pairs)} runs trained together",
+        file=out,
+        flush=True,
+    )
+    configs = [c for _, c in pairs]
+    # Refusals (existing runs, resume mismatches) come before anything is written.
+    for config in configs:
+        training.RunDirectory(config).check()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / GRID_FILE).write_text(json.dumps(record, indent=2))
+    labels = [v for v, _ in pairs]
+    summaries = training.run_population(configs, out, env_factory, labels=labels)
+    return [s | {"variant": v} for s, (v, _) in zip(summaries, pairs)]
+
+
+RUN_USAGE = """Train an experiment grid (seeds x reward variants of one task) in one program.
+
+    python -m mjx_hands.experiments run --task handshake --seeds 5 --run-dir runs/fig4-handshake
+    python -m mjx_hands.experiments run --run-dir runs/fig4-handshake --resume
+
+Each member is a run directory RUN_DIR/<variant>/seed<k> (evaluate opens it); the
+progress line shows each variant's mean evaluation success at the end of the episode."""
+
+
+def run_main(argv: list[str]) -> int:
+    from mjx_hands import checkpoint
+    from mjx_hands.mocap import MocapError
+
+    try:
+        default = _grid_default(argv)
+        grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
+        summaries = run_grid(grid)
+    except training.TrainingDiverged as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 3
+    except (ValueError, MocapError, checkpoint.CheckpointError, FileNotFoundError, FileExistsError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    by_variant: dict[str, list[float]] = {}
+    for s in summaries:
+        by_variant.setdefault(s["variant"], []).append(s["final_eval"].get(HEADLINE, math.nan))
+    shown = ", ".join(f"{v} {mean_se(x)[0]:.2f} +- {mean_se(x)[1]:.2f}" for v, x in by_variant.items())
+    print(f"done ({summaries[0]['stop_reason']}): success at the end, mean +- SE: {shown}")
+    print(f"report: python -m mjx_hands.experiments report {grid.train.run_dir}")
+    return 0
+
+
+# ---------------------------------------------------------------------- report
+def mean_se(values) -> tuple[float, float]:
+    """Mean and standard error (sample std / sqrt(n); 0 for one value) of the finite values."""
+    x = np.asarray([v for v in values if math.isfinite(v)], float)
+    if x.size == 0:
+        return math.nan, math.nan
+    se = float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
+    return float(x.mean()), se
+
+
+def welch(a, b) -> tuple[float, float]:
+    """Welch's two-sided t-test of mean(a) != mean(b): (t, p). Samples without spread
+    compare exactly: p = 1 when the means are equal, else 0."""
+    from scipy import stats
+
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if len(a) < 2 or len(b) < 2:
+        return math.nan, math.nan
+    if a.std() == 0 and b.std() == 0:
+        same = a.mean() == b.mean()
+        return (0.0, 1.0) if same else (math.copysign(math.inf, a.mean() - b.mean()), 0.0)
+    result = stats.ttest_ind(a, b, equal_var=False)
+    return float(result.statistic), float(result.pvalue)
+
+
+def _read_rows(path: Path) -> list[dict[str, float]]:
+    with path.open() as f:
+        return [
+            {k: float(v) for k, v in r.items() if k is not None and v not in ("", None)}
+            for r in csv.DictReader(f)
+        ]
+
+
+def load_grid(grid_dir: Path) -> dict[str, Any]:
+    """A grid's record and each member's evaluation rows:
+    ``{'task', 'dir', 'members': [{'variant', 'seed', 'evals': [row, ...]}]}``."""
+    path = Path(grid_dir) / GRID_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{grid_dir} is not an experiment grid ({GRID_FILE} missing)")
+    record = json.loads(path.read_text())
+    loaded = []
+    for m in record["members"]:
+        metrics = Path(grid_dir) / m["run_dir"] / "metrics.csv"
+        rows = _read_rows(metrics) if metrics.is_file() else []
+        loaded.append(m | {"evals": [r for r in rows if HEADLINE in r]})
+    return {"task": record["task"], "dir": str(grid_dir), "members": loaded}
+
+
+def curves(grid: dict[str, Any], key: str = HEADLINE) -> dict[str, dict[str, np.ndarray]]:
+    """Per variant, mean and SE of ``key`` over seeds at each evaluation epoch that every
+    seed reached: ``{variant: {'epoch', 'env_steps', 'wall_seconds', 'mean', 'se', 'n'}}``."""
+    out = {}
+    variants = dict.fromkeys(m["variant"] for m in grid["members"])
+    for variant in variants:
+        runs = [m["evals"] for m in grid["members"] if m["variant"] == variant and m["evals"]]
+        if not runs:
+            continue
+        epochs = sorted(set.intersection(*[{r["epoch"] for r in evals} for evals in runs]))
+        by_epoch = [{r["epoch"]: r for r in evals} for evals in runs]
+        stats = [mean_se([b[e].get(key, math.nan) for b in by_epoch]) for e in epochs]
+        out[variant] = {
+            "epoch": np.asarray(epochs),
+            "env_steps": np.asarray([np.mean([b[e]["train/env_steps"] for b in by_epoch]) for e in epochs]),
+            "wall_seconds": np.asarray(
+                [np.mean([b[e].get("time/wall_seconds", math.nan) for b in by_epoch]) for e in epochs]
+            ),
+            "mean": np.asarray([s[0] for s in stats]),
+            "se": np.asarray([s[1] for s in stats]),
+            "n": len(runs),
+        }
+    return out
+
+
+SUMMARY_KEYS = {
+    "success_end": HEADLINE,
+    "success_some_step": "eval/success",
+    "fingertip_goal_distance": "eval/final_fingertip_goal_distance",
+    "palm_goal_distance": "eval/final_palm_goal_distance",
+}
+
+
+def summarize(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (task, variant): n seeds, the last evaluation's figures (mean, SE and
+    the per-seed values) and the best success at the end over each seed's evaluations."""
+    rows = []
+    for grid in grids:
+        variants = dict.fromkeys(m["variant"] for m in grid["members"])
+        for variant in variants:
+            runs = [m for m in grid["members"] if m["variant"] == variant and m["evals"]]
+            if not runs:
+                continue
+            row: dict[str, Any] = {
+                "task": grid["task"],
+                "variant": variant,
+                "n_seeds": len(runs),
+                "seeds": [m["seed"] for m in runs],
+                "final_epoch": min(m["evals"][-1]["epoch"] for m in runs),
+                "final_env_steps": float(np.mean([m["evals"][-1]["train/env_steps"] for m in runs])),
+            }
+            for name, key in SUMMARY_KEYS.items():
+                values = [m["evals"][-1].get(key, math.nan) for m in runs]
+                row[f"final_{name}"], row[f"final_{name}_se"] = mean_se(values)
+                row[f"final_{name}_values"] = values
+            best = [max(r[HEADLINE] for r in m["evals"]) for m in runs]
+            row["best_success_end"], row["best_success_end_se"] = mean_se(best)
+            row["best_success_end_values"] = best
+            rows.append(row)
+    return rows
+
+
+def _lookup(summary: list[dict[str, Any]], task: str, variant: str) -> dict[str, Any] | None:
+    return next((r for r in summary if r["task"] == task and r["variant"] == variant), None)
+
+
+def _compare(summary, task, a, b, metric, better: str) -> dict[str, Any]:
+    """Welch test of variant ``a`` vs ``b`` on ``metric`` ('higher' or 'lower' is better for
+    ``a`` to hold): verdict held / not held / not significant, with the numbers."""
+    ra, rb = _lookup(summary, task, a), _lookup(summary, task, b)
+    if ra is None or rb is None:
+        missing = [v for v, r in ((a, ra), (b, rb)) if r is None]
+        return {"task": task, "comparison": f"{a} vs {b}", "verdict": "not tested",
+                "why": f"no {', '.join(missing)} runs of {task}"}
+    xa, xb = ra[f"final_{metric}_values"], rb[f"final_{metric}_values"]
+    t, p = welch(xa, xb)
+    diff = ra[f"final_{metric}"] - rb[f"final_{metric}"]
+    wanted = diff > 0 if better == "higher" else diff < 0
+    if not math.isfinite(p):
+        verdict = "not tested"
+    elif p >= ALPHA:
+        verdict = "not significant"
+    else:
+        verdict = "held" if wanted else "not held"
+    return {
+        "task": task,
+        "comparison": f"{a} vs {b}",
+        "metric": f"final {metric}",
+        a: f"{ra[f'final_{metric}']:.3f} +- {ra[f'final_{metric}_se']:.3f} (n={ra['n_seeds']})",
+        b: f"{rb[f'final_{metric}']:.3f} +- {rb[f'final_{metric}_se']:.3f} (n={rb['n_seeds']})",
+        "t": t,
+        "p": p,
+        "verdict": verdict,
+    }
+
+
+def _combine(parts: list[dict[str, Any]]) -> str:
+    """held if every tested part held; not held if any part contradicts; else not significant."""
+    verdicts = [p["verdict"] for p in parts if p["verdict"] != "not tested"]
+    if not verdicts:
+        return "not tested"
+    if "not held" in verdicts:
+        return "not held"
+    if all(v == "held" for v in verdicts):
+        return "held"
+    return "not significant"
+
+
+def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The paper's four findings about Fig. 4, judged on the grids' final evaluations."""
+    out = []
+    parts = [
+        _compare(summary, task, "full", baseline, "success_end", "higher")
+        for task in ("handshake", "et")
+        for baseline in ("baseline1", "baseline2")
+    ]
+    out.append({
+        "statement": "1. The full reward beats both baselines on the handshake and E.T. "
+        "(success at the end).",
+        "verdict": _combine(parts),
+        "tests": parts,
+    })
+    parts = [
+        _compare(summary, task, "baseline2", "baseline1", "fingertip_goal_distance", "lower")
+        for task in ("handshake", "et")
+    ]
+    out.append({
+        "statement": "2. Baseline 2 ends closer to the desired final pose than Baseline 1 "
+        "(handshake, E.T.; mean fingertip-to-goal distance at the last step, metres).",
+        "verdict": _combine(parts),
+        "tests": parts,
+    })
+    clap = _lookup(summary, "handclap", "baseline1")
+    if clap is None:
+        out.append({
+            "statement": "3. On the hand clap Baseline 1 reaches a high success rate.",
+            "verdict": "not tested",
+            "tests": [{"why": "no baseline1 runs of handclap"}],
+        })
+    else:
+        from scipy import stats
+
+        n, mean, se = clap["n_seeds"], clap["final_success_end"], clap["final_success_end_se"]
+        half = float(stats.t.ppf(1 - ALPHA / 2, n - 1) * se) if n > 1 else math.nan
+        low, high = mean - half, mean + half
+        if not math.isfinite(half):
+            verdict = "not tested"
+        elif low >= HIGH_SUCCESS:
+            verdict = "held"
+        elif high < HIGH_SUCCESS:
+            verdict = "not held"
+        else:
+            verdict = "not significant"
+        out.append({
+            "statement": f"3. On the hand clap Baseline 1 reaches a high success rate "
+            f"(at the end; high: >= {HIGH_SUCCESS}, judged by the 95 % confidence interval).",
+            "verdict": verdict,
+            "tests": [{"task": "handclap", "baseline1": f"{mean:.3f} +- {se:.3f} (n={n})",
+                       "ci95": [low, high]}],
+        })
+    parts = [
+        _compare(summary, task, "full", "no_imitation", "success_end", "higher")
+        for task in ("handshake", "handclap", "et")
+    ]
+    tested = [p for p in parts if p["verdict"] != "not tested"]
+    if not tested:
+        verdict = "not tested"
+    elif all(p["verdict"] == "not significant" for p in tested):
+        verdict = "held"
+    else:
+        verdict = "not held"
+    out.append({
+        "statement": "4. Adding imitation does not significantly change success rates "
+        f"(Welch's t-test, p >= {ALPHA}, per task).",
+        "verdict": verdict,
+        "tests": parts,
+    })
+    return out
+
+
+COLORS = {"full": "C0", "baseline1": "C1", "baseline2": "C2", "no_imitation": "C3"}
+
+
+def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
+    """Success at the end vs env steps (top) and wall clock (bottom), one column per task."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, len(grids), figsize=(4.5 * len(grids), 7), squeeze=False)
+    for column, grid in enumerate(grids):
+        for variant, c in curves(grid).items():
+            color = COLORS.get(variant)
+            label = f"{variant} (n={c['n']})"
+            for row, x in enumerate((c["env_steps"], c["wall_seconds"] / 60)):
+                ax = axes[row, column]
+                ax.plot(x, c["mean"], color=color, label=label)
+                ax.fill_between(x, c["mean"] - c["se"], c["mean"] + c["se"], color=color, alpha=0.2)
+        axes[0, column].set_title(grid["task"])
+        axes[0, column].set_xlabel("environment steps per run")
+        axes[1, column].set_xlabel("wall clock of the grid, minutes")
+        for ax in axes[:, column]:
+            ax.set_ylim(-0.02, 1.02)
+            ax.grid(alpha=0.3)
+            ax.set_ylabel("success at the end of the episode")
+        axes[0, column].ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+        axes[0, column].legend(loc="best", fontsize=8)
+    fig.suptitle("Evaluation success at the last step, mean +- SE over seeds")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
+    """fig4.png, summary.csv/.json, statements.json/.md from ``grid_dirs`` into ``out_dir``."""
+    grids = [load_grid(d) for d in grid_dirs]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = summarize(grids)
+    if not summary:
+        raise ValueError(f"no evaluations in {', '.join(map(str, grid_dirs))} yet")
+    judged = statements(summary)
+    plot_fig4(grids, out_dir / "fig4.png")
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    flat = [{k: v for k, v in r.items() if not isinstance(v, list)} for r in summary]
+    with (out_dir / "summary.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(flat[0]))
+        writer.writeheader()
+        writer.writerows(flat)
+    (out_dir / "statements.json").write_text(json.dumps(judged, indent=2))
+    lines = ["| statement | verdict | numbers |", "|---|---|---|"]
+    for s in judged:
+        numbers = "; ".join(
+            ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in t.items()
+                      if k not in ("statement",))
+            for t in s["tests"]
+        )
+        lines.append(f"| {s['statement']} | **{s['verdict']}** | {numbers} |")
+    (out_dir / "statements.md").write_text("\n".join(lines) + "\n")
+    return {"summary": summary, "statements": judged}
+
+
+@dataclasses.dataclass(frozen=True)
+class ReportArgs:
+    """Report experiment grids: Fig.-4-style plot, summary table, the paper's statements."""
+
+    grid_dirs: tyro.conf.Positional[tuple[str, ...]]
+    """Grid folders (each written by `experiments run`), e.g. one per task."""
+    out: str = "fig4_report"
+    """Folder for fig4.png, summary.csv/.json and statements.json/.md."""
+
+
+def report_main(argv: list[str]) -> int:
+    args = tyro.cli(ReportArgs, args=argv)
+    try:
+        result = write_report([Path(d) for d in args.grid_dirs], Path(args.out))
+    except (FileNotFoundError, ValueError, KeyError, json.JSONDecodeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for row in result["summary"]:
+        print(
+            f"{row['task']:9s} {row['variant']:13s} n={row['n_seeds']}  success at the end "
+            f"{row['final_success_end']:.2f} +- {row['final_success_end_se']:.2f} "
+            f"(best {row['best_success_end']:.2f}; some step {row['final_success_some_step']:.2f})"
+        )
+    for s in result["statements"]:
+        print(f"[{s['verdict']}] {s['statement']}")
+    print(f"written: {args.out}/fig4.png, summary.csv, summary.json, statements.md")
+    return 0
+
+
+USAGE = """usage: python -m mjx_hands.experiments {run,report} [--help] ...
+
+  run     train seeds x reward variants of one task as one population
+  report  Fig.-4-style plot, summary table and the paper's statements from grids"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    commands = {"run": run_main, "report": report_main}
+    if not argv or argv[0] not in commands:
+        if argv and argv[0] in ("-h", "--help"):
+            print(USAGE)
+            return 0
+        print(USAGE, file=sys.stderr)
+        print(f"error: expected a command, run or report; got {argv[:1] or 'none'}", file=sys.stderr)
+        return 2
+    return commands[argv[0]](argv[1:])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

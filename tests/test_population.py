@@ -1,0 +1,302 @@
+"""Population training and experiment grids: a member trains as it would alone, members
+are independent, a grid runs and resumes end to end, the report's statistics are right."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from mjx_hands import experiments, training
+from mjx_hands.agents.ddpg import DDPG, DDPGConfig, member
+from mjx_hands.point_reach import make_point_reach
+
+ROOT = Path(__file__).resolve().parents[1]
+
+POINT = DDPGConfig(
+    hidden_sizes=(32, 32),
+    batch_size=64,
+    replay_capacity=4_000,
+    min_replay_size=256,
+    unroll_length=4,
+    updates_per_iteration=8,
+    iterations_per_epoch=5,
+)
+
+
+def _train(algo: DDPG, seeds: list[int], epochs: int):
+    state = algo.init(np.stack([np.asarray(jax.random.PRNGKey(s)) for s in seeds]))
+    history = []
+    for _ in range(epochs):
+        state, metrics = algo.run_epoch(state)
+        history.append(metrics)
+    return jax.device_get(state), history
+
+
+def _assert_trees_close(a, b, tol: float, what: str) -> None:
+    """Leaves equal within ``tol`` relative and absolute (0: bit for bit)."""
+    for (path, x), y in zip(jax.tree_util.tree_leaves_with_path(a), jax.tree.leaves(b)):
+        np.testing.assert_allclose(
+            np.asarray(x), np.asarray(y), atol=tol, rtol=tol,
+            err_msg=f"{what}{jax.tree_util.keystr(path)}",
+        )
+
+
+def test_a_population_of_two_equals_two_runs_alone():
+    """Point reach: members (seeds 0 and 5) of one population end where two single runs
+    with those seeds end: parameters, optimiser states, replay buffers, metrics."""
+    env = make_point_reach(16)
+    pair = DDPG(env, POINT, episode_length=20, members=2)
+    pop, pop_history = _train(pair, [0, 5], epochs=3)
+    for index, seed in enumerate([0, 5]):
+        alone, history = _train(DDPG(env, POINT, episode_length=20), [seed], epochs=3)
+        _assert_trees_close(member(pop, index).learner, member(alone, 0).learner, 1e-5, "learner")
+        _assert_trees_close(member(pop, index).buffer, member(alone, 0).buffer, 1e-5, "buffer")
+        assert pop_history[-1][index]["train/updates"] == history[-1][0]["train/updates"] > 0
+        np.testing.assert_allclose(
+            pop_history[-1][index]["train/episode_return"],
+            history[-1][0]["train/episode_return"],
+            rtol=1e-4,
+        )
+    # The members are distinct runs, not copies.
+    a, b = (np.asarray(jax.tree.leaves(member(pop, i).learner.actor_params)[0]) for i in (0, 1))
+    assert np.abs(a - b).max() > 1e-3
+
+
+def test_population_refuses_member_info_of_the_wrong_size():
+    with pytest.raises(ValueError, match="leading axis of the 3 members"):
+        DDPG(make_point_reach(4), POINT, episode_length=20, members=3,
+             member_info={"reward_weights": np.zeros((2, 5))})
+    with pytest.raises(ValueError, match="one key per member"):
+        DDPG(make_point_reach(4), POINT, episode_length=20, members=2).init(jax.random.PRNGKey(0))
+
+
+HAND = DDPGConfig(
+    hidden_sizes=(32, 32),
+    batch_size=64,
+    replay_capacity=2_048,
+    min_replay_size=256,
+    unroll_length=4,
+    updates_per_iteration=4,
+    iterations_per_epoch=4,
+)
+
+
+def _hand_config(**overrides) -> training.TrainConfig:
+    return training.TrainConfig(
+        task="handshake", mocap_source="synthetic", physics="native", num_envs=16,
+        eval_envs=16, ddpg=HAND, **overrides,
+    )
+
+
+@pytest.mark.slow
+def test_reward_variants_are_data_and_members_are_independent():
+    """On the hand task (native physics): a baseline-1 member of a population (its
+    variant as data) trains as a baseline-1 run alone (variant from its config); changing
+    the other member's variant leaves member 0 bit for bit unchanged."""
+    configs = {
+        v: _hand_config(reward=v, seed=s, run_dir=f"unused/{v}")
+        for v, s in (("full", 0), ("baseline1", 1), ("baseline2", 1))
+    }
+    num_devices = len(jax.local_devices())
+
+    def population(names: list[str]):
+        cs = [configs[n] for n in names]
+        train_env, eval_env, single = training.make_envs(cs[0], num_devices)
+        algo = DDPG(train_env, HAND, episode_length=single.episode_length, eval_env=eval_env,
+                    members=len(cs), member_info=training.member_variants(single, cs))
+        state, history = _train(algo, [c.seed for c in cs], epochs=2)
+        evals = algo.evaluate(state, np.stack([np.asarray(jax.random.PRNGKey(9))] * len(cs)))
+        return state, history, evals
+
+    with_b1, history_b1, evals_b1 = population(["full", "baseline1"])
+    with_b2, history_b2, _ = population(["full", "baseline2"])
+    alone, history_alone, evals_alone = population(["baseline1"])
+    # Independence: member 0 (full, seed 0) is identical whoever its neighbour is.
+    _assert_trees_close(member(with_b1, 0).learner, member(with_b2, 0).learner, 0.0, "learner")
+    np.testing.assert_equal(history_b1[-1][0], history_b2[-1][0])  # NaN: no episode ended yet
+    # ... while the neighbours were rewarded differently (baseline 2: no contact term).
+    assert history_b2[-1][1]["env/reward/contact"] == 0.0
+    assert history_b1[-1][1]["env/reward/contact"] >= 0.0
+    # Equivalence: the baseline-1 member equals the baseline-1 run alone.
+    _assert_trees_close(member(with_b1, 1).learner, member(alone, 0).learner, 1e-4, "learner")
+    for key in ("env/reward/position", "env/reward/total", "sgd/critic_loss"):
+        np.testing.assert_allclose(history_b1[-1][1][key], history_alone[-1][0][key], rtol=1e-4)
+    np.testing.assert_allclose(
+        evals_b1[1]["eval/episode_return"], evals_alone[0]["eval/episode_return"], rtol=1e-4
+    )
+    assert evals_b1[1]["eval/final_fingertip_goal_distance"] > 0
+
+
+# ------------------------------------------------------------------ grid CLI
+def _experiments(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "mjx_hands.experiments", *args],
+        cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False,
+    )
+
+
+TINY = [
+    "--task", "handshake", "--mocap-source", "synthetic", "--physics", "native",
+    "--num-envs", "8", "--eval-envs", "8", "--eval-every", "1", "--ddpg.hidden-sizes", "16", "16",
+    "--ddpg.batch-size", "32", "--ddpg.replay-capacity", "1024", "--ddpg.min-replay-size", "64",
+    "--ddpg.unroll-length", "4", "--ddpg.updates-per-iteration", "2",
+    "--ddpg.iterations-per-epoch", "3",
+]
+
+
+@pytest.mark.slow
+def test_a_grid_runs_resumes_and_reports_end_to_end(tmp_path):
+    grid = tmp_path / "grid"
+    first = _experiments("run", *TINY, "--variants", "full", "baseline2", "--seeds", "2",
+                         "--epochs", "1", "--run-dir", str(grid))
+    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-3000:]
+    assert "4 runs trained together" in first.stdout
+    assert "eval success at the end: full" in first.stdout
+    record = json.loads((grid / "grid.json").read_text())
+    assert [(m["variant"], m["seed"]) for m in record["members"]] == [
+        ("full", 0), ("full", 1), ("baseline2", 0), ("baseline2", 1)
+    ]
+    resumed = _experiments("run", "--run-dir", str(grid), "--resume", "--epochs", "2")
+    assert resumed.returncode == 0, resumed.stdout[-2000:] + resumed.stderr[-3000:]
+    assert "resumed from epoch 1" in resumed.stdout
+    for m in record["members"]:
+        run_dir = grid / m["run_dir"]
+        config = json.loads((run_dir / "config.json").read_text())
+        assert (config["seed"], config["reward"]) == (m["seed"], m["variant"])
+        rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
+        assert [r["epoch"] for r in rows] == ["1.0", "2.0"]
+        assert (run_dir / "best").is_dir() and (run_dir / "success.png").is_file()
+    # A member is an ordinary run: evaluate opens it.
+    evaluated = subprocess.run(
+        [sys.executable, "-m", "mjx_hands.evaluate", str(grid / "baseline2" / "seed1"),
+         "--episodes", "4", "--video-episodes", "0"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False,
+    )
+    assert evaluated.returncode == 0, evaluated.stderr[-3000:]
+    report = _experiments("report", str(grid), "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr[-3000:]
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert {(r["variant"], r["n_seeds"], r["final_epoch"]) for r in summary} == {
+        ("full", 2, 2.0), ("baseline2", 2, 2.0)
+    }
+    assert (tmp_path / "report" / "fig4.png").stat().st_size > 10_000
+    again = _experiments("run", *TINY, "--seeds", "1", "--run-dir", str(grid))
+    assert again.returncode == 2 and "already holds a grid" in again.stderr
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["run", "--seeds", "2"], "--run-dir is required"),
+        (["run", "--run-dir", "x", "--reward", "baseline1"], "name --variants instead"),
+        (["run", "--run-dir", "x", "--seeds", "0"], "--seeds must be positive"),
+        (["run", "--run-dir", "x", "--variants", "full", "full"], "repeats a variant"),
+        (["run", "--run-dir", "does/not/exist", "--resume"], "no grid to continue"),
+        (["report", "does/not/exist"], "is not an experiment grid"),
+        (["frobnicate"], "expected a command"),
+    ],
+)
+def test_grid_commands_refuse_bad_input_with_a_message(args, message):
+    result = _experiments(*args, timeout=300)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert message in result.stderr and "Traceback" not in result.stderr
+
+
+# ------------------------------------------------------------------ report statistics
+def _fixture_grid(root: Path, task: str, finals: dict[str, list[float]], distance: dict) -> Path:
+    """A grid folder with hand-written metrics.csv files: two evaluations per member."""
+    grid = root / task
+    members = []
+    for variant, values in finals.items():
+        for seed, final in enumerate(values):
+            run = grid / variant / f"seed{seed}"
+            run.mkdir(parents=True)
+            rows = [
+                {"epoch": 5, "train/env_steps": 1000, "time/wall_seconds": 60,
+                 "eval/success": 0.5, "eval/success_final": 0.1 * seed,
+                 "eval/final_fingertip_goal_distance": 0.2},
+                {"epoch": 10, "train/env_steps": 2000, "time/wall_seconds": 120,
+                 "eval/success": 1.0, "eval/success_final": final,
+                 "eval/final_fingertip_goal_distance": distance[variant][seed]},
+            ]
+            with (run / "metrics.csv").open("w", newline="") as f:
+                writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+                writer.writeheader()
+                writer.writerows(rows)
+            members.append({"variant": variant, "seed": seed, "run_dir": f"{variant}/seed{seed}"})
+    (grid / "grid.json").write_text(json.dumps({"task": task, "members": members}))
+    return grid
+
+
+def test_report_statistics_match_a_hand_computation(tmp_path):
+    finals = {
+        "full": [0.9, 0.8, 1.0],
+        "baseline1": [0.2, 0.1, 0.3],
+        "baseline2": [0.5, 0.7, 0.6],
+        "no_imitation": [0.85, 0.95, 0.9],
+    }
+    distance = {
+        "full": [0.01, 0.02, 0.03],
+        "baseline1": [0.10, 0.12, 0.11],
+        "baseline2": [0.05, 0.04, 0.06],
+        "no_imitation": [0.02, 0.02, 0.03],
+    }
+    grid = _fixture_grid(tmp_path, "handshake", finals, distance)
+    result = experiments.write_report([grid], tmp_path / "report")
+    rows = {r["variant"]: r for r in result["summary"]}
+    # Mean and standard error by hand: full = (0.9, 0.8, 1.0).
+    assert rows["full"]["final_success_end"] == pytest.approx(0.9)
+    assert rows["full"]["final_success_end_se"] == pytest.approx(0.1 / math.sqrt(3))
+    assert rows["baseline1"]["best_success_end"] == pytest.approx(0.2)  # max(0.1*seed, final)
+    # Welch's t for full vs baseline2: means 0.9 / 0.6, variances 0.01 / 0.01, n = 3.
+    t_hand = (0.9 - 0.6) / math.sqrt(0.01 / 3 + 0.01 / 3)
+    first = result["statements"][0]
+    test = next(t for t in first["tests"] if t["comparison"] == "full vs baseline2")
+    assert test["t"] == pytest.approx(t_hand)
+    # Welch-Satterthwaite dof = 4 for equal variances and n = 3: p from Student's t.
+    from scipy import stats
+
+    assert test["p"] == pytest.approx(2 * stats.t.sf(t_hand, 4))
+    assert test["verdict"] == "held"
+    # E.T. is missing: statement 1 rests on the handshake only, statement 3 is untested.
+    assert first["verdict"] == "held"
+    assert result["statements"][1]["verdict"] == "held"  # baseline2 closer than baseline1
+    assert result["statements"][2]["verdict"] == "not tested"
+    assert result["statements"][3]["verdict"] == "held"  # full vs no_imitation: p > 0.05
+    summary_csv = list(csv.DictReader((tmp_path / "report" / "summary.csv").open()))
+    assert len(summary_csv) == 4 and "statements.md" in {p.name for p in (tmp_path / "report").iterdir()}
+
+
+def test_curves_average_seeds_at_shared_evaluations(tmp_path):
+    grid = experiments.load_grid(
+        _fixture_grid(tmp_path, "et", {"full": [1.0, 0.5]}, {"full": [0.0, 0.0]})
+    )
+    c = experiments.curves(grid)["full"]
+    np.testing.assert_allclose(c["mean"], [0.05, 0.75])
+    np.testing.assert_allclose(c["se"], [0.05, 0.25])
+    np.testing.assert_allclose(c["env_steps"], [1000, 2000])
+
+
+def test_grid_members_differ_only_in_seed_and_variant():
+    grid = experiments.GridConfig(variants=("full", "no_imitation"), seeds=2,
+                     train=dataclasses.replace(training.preset("cpu"), run_dir="g", seed=3))
+    pairs = experiments.members(grid)
+    assert [(v, c.seed, c.reward, c.imitation, c.run_dir) for v, c in pairs] == [
+        ("full", 3, "full", True, "g/full/seed3"),
+        ("full", 4, "full", True, "g/full/seed4"),
+        ("no_imitation", 3, "full", False, "g/no_imitation/seed3"),
+        ("no_imitation", 4, "full", False, "g/no_imitation/seed4"),
+    ]
+    with pytest.raises(ValueError, match="differ only in"):
+        training.run_population(
+            [pairs[0][1], dataclasses.replace(pairs[1][1], num_envs=32)], env_factory=None
+        )
