@@ -5,6 +5,7 @@
 #
 #   BUDGET_S=560 bash benchmarks/gpu_session.sh
 #   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
+#   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
@@ -58,10 +59,34 @@ train() {
   for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
 }
 
+grid() {
+  # The paper's Fig. 4 grid: per task one population of variants x seeds (one program),
+  # the tasks one after another in equal shares of what is left; then the report.
+  tasks=${GRID_TASKS:-handshake handclap et}
+  n=$(echo $tasks | wc -w)
+  for task in $tasks; do
+    left=$((BUDGET_S - SECONDS))
+    minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
+    n=$((n - 1 > 0 ? n - 1 : 1))
+    echo "== grid $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+    rm -rf "/tmp/grid-$task"
+    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
+      --preset gpu --seeds "${GRID_SEEDS:-5}" --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
+      --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
+      --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/grid-$task" \
+      ${GRID_ARGS:-} 2>&1 | tee "$OUT/grid-$task.log"
+    # Everything but checkpoints: metrics, configs, plots of every member.
+    (cd /tmp && find "grid-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
+      | tar -cf - -T -) | tar -xf - -C "$OUT"
+  done
+  python3 -m mjx_hands.experiments report $(for t in $tasks; do echo "$OUT/grid-$t"; done) \
+    --out "$OUT/fig4" 2>&1 | tee "$OUT/report.log"
+}
+
 for stage in $STAGES; do
   case $stage in
-    throughput|train) "$stage" ;;
-    *) echo "unknown stage $stage; expected throughput or train" >&2; exit 2 ;;
+    throughput|train|grid) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput, train or grid" >&2; exit 2 ;;
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"

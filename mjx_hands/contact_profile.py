@@ -16,42 +16,50 @@ import numpy as np
 from mjx_hands import shadow_hand
 
 
-def summarize(contacts: np.ndarray, required: np.ndarray) -> dict:
+def summarize(contacts: np.ndarray, groups: np.ndarray) -> dict:
     """JSON-ready contact profile.
 
     Args:
       contacts: (T, n, 15) sensor readings (0/1) of n episodes over T control steps, in
         ``shadow_hand.CONTACT_SENSORS`` order.
-      required: (15,) bool, the task's required sensors.
+      groups: (G, 15) bool, the task's success groups (one sensor of each must touch;
+        empty rows are ignored), or (15,) required sensors that must all touch.
     Returns:
       ``touched``: per sensor, the fraction of episodes in which it touched at some step;
       ``in_contact``: per sensor, the fraction of episode steps in contact;
-      ``required``: names of the required sensors;
-      ``all_required_over_time``: (T,) fraction of episodes with every required sensor
-      in contact at that step;
-      ``episodes_by_required_at_once``: histogram over episodes of the most required
-      sensors in contact at one step (index k: episodes whose best step had k);
-      ``success``: fraction of episodes with every required sensor in contact at some step.
+      ``required``: names of the required sensors; ``groups``: names per group;
+      ``all_required_over_time``: (T,) fraction of episodes with every group satisfied
+      at that step;
+      ``episodes_by_required_at_once``: histogram over episodes of the most groups
+      satisfied at one step (index k: episodes whose best step had k);
+      ``success``: fraction of episodes with every group satisfied at some step;
+      ``success_final``: ... at the last step (the authors' metric).
     """
     contacts = np.asarray(contacts) > 0.5
-    required = np.asarray(required, bool)
+    groups = np.asarray(groups, bool)
     names = shadow_hand.CONTACT_SENSORS
-    if contacts.ndim != 3 or contacts.shape[-1] != len(names) or required.shape != (len(names),):
+    if groups.ndim == 1:
+        groups = np.diag(groups)
+    if contacts.ndim != 3 or contacts.shape[-1] != len(names) or groups.shape[-1] != len(names):
         raise ValueError(
-            f"expected contacts (T, n, {len(names)}) and required ({len(names)},), "
-            f"got {contacts.shape} and {required.shape}"
+            f"expected contacts (T, n, {len(names)}) and groups (G, {len(names)}), "
+            f"got {contacts.shape} and {groups.shape}"
         )
-    at_once = contacts[..., required].sum(-1)  # (T, n)
-    all_required = at_once == required.sum()
+    groups = groups[groups.any(-1)]
+    satisfied = (contacts[..., None, :] & groups).any(-1)  # (T, n, G)
+    at_once = satisfied.sum(-1)  # (T, n)
+    all_required = at_once == len(groups)
     return {
         "touched": dict(zip(names, contacts.any(0).mean(0).tolist(), strict=True)),
         "in_contact": dict(zip(names, contacts.mean((0, 1)).tolist(), strict=True)),
-        "required": [n for n, r in zip(names, required, strict=True) if r],
+        "required": [n for n, r in zip(names, groups.any(0), strict=True) if r],
+        "groups": [[n for n, r in zip(names, g, strict=True) if r] for g in groups],
         "all_required_over_time": all_required.mean(1).tolist(),
         "episodes_by_required_at_once": np.bincount(
-            at_once.max(0), minlength=int(required.sum()) + 1
+            at_once.max(0), minlength=len(groups) + 1
         ).tolist(),
         "success": float(all_required.any(0).mean()),
+        "success_final": float(all_required[-1].mean()),
     }
 
 

@@ -68,7 +68,7 @@ def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
             np.stack([state.metrics[f"contact/{n}"] for n in shadow_hand.CONTACT_SENSORS], -1)
         )
         episode_return += np.asarray(state.reward)
-    profile = contact_profile.summarize(np.stack(contacts), env.params.required_contacts[0])
+    profile = contact_profile.summarize(np.stack(contacts), env.params.success_groups[0])
     return {
         "task": env.config.task,
         "demonstrations": env.demos[0].source,

@@ -83,6 +83,30 @@ def place_target(
     return np.asarray(contact_point) - rot @ actor_pos, rot
 
 
+DEMO_SETS = ("authors", "all")
+
+
+def select_demos(demos: list, task: str, which: str) -> list:
+    """``demos`` of the recordings restricted to ``which`` set (see ``EnvConfig.demos``).
+
+    The authors left out, e.g., handshake rows 3-6, whose ``interaction_t`` window lies
+    in the approach, 4-5 cm short of the grip (``benchmarks/RESULTS.md``, "Fidelity").
+    """
+    if which not in DEMO_SETS:
+        raise ValueError(f"unknown demonstration set {which!r}; expected one of {DEMO_SETS}")
+    if which == "all" or demos[0].source != "optitrack":
+        return demos
+    by_row = {int(d.name.rsplit("/", 1)[-1]): d for d in demos}
+    rows = tasks.spec(task).authors_demos
+    missing = [r for r in rows if r not in by_row]
+    if missing:
+        raise ValueError(
+            f"{task}: the recordings lack rows {missing} of the authors' set {rows}; "
+            "pass demos='all' to use what there is"
+        )
+    return [by_row[r] for r in rows]
+
+
 def target_tilt(rng: jax.Array, noise: float, angle: float | None = None) -> jax.Array:
     """Quaternion (4,) of the target hand's per-episode tilt: about a uniformly random
     axis, by ``angle`` radians if given, else by a Gaussian angle of std ``noise``."""
@@ -125,6 +149,10 @@ class EnvConfig:
     """'optitrack' (the authors' recordings), 'synthetic' (mocap_data/) or 'auto'."""
     mocap_path: str | None = None
     """Folder of the demonstrations; None uses the source's default location."""
+    demos: str = "authors"
+    """Which of the recordings' demonstrations: 'authors' (those the authors trained on,
+    ``tasks.TaskSpec.authors_demos``) or 'all'. The project's synthetic files are used
+    whole."""
     control_dt: float = tasks.CONTROL_DT
     """Control period, seconds (a multiple of the physics timestep)."""
     episode_length: int | None = None
@@ -209,8 +237,12 @@ class HandInteractionEnv(Env):
         self.physics = physics.make_physics(
             config.physics, self.mj_model, self.n_substeps, config.contact_distance
         )
-        self.demos = mocap.load_demonstrations(
-            config.task, source=config.mocap_source, path=config.mocap_path
+        self.demos = select_demos(
+            mocap.load_demonstrations(
+                config.task, source=config.mocap_source, path=config.mocap_path
+            ),
+            config.task,
+            config.demos,
         )
         self.params = reward_params.build_task_params(
             self.demos, reward_weights(config), config.control_dt
@@ -475,7 +507,7 @@ class HandInteractionEnv(Env):
             contacts=features["contacts"],
             action=action,
         )
-        success = rewards.success(features["contacts"], p.required_contacts).astype(jnp.float32)
+        success = rewards.success(features["contacts"], p.success_groups).astype(jnp.float32)
 
         finite = readings.finite
         truncated = episode.step >= self.episode_length

@@ -150,8 +150,8 @@ def summarize(single, trajectory: dict[str, np.ndarray]) -> tuple[dict, dict | N
     }
     if "contacts" not in trajectory:
         return metrics, None
-    required = np.asarray(single.params.required_contacts[0])
-    return metrics, contact_profile.summarize(trajectory["contacts"], required)
+    groups = np.asarray(single.params.success_groups[0])
+    return metrics, contact_profile.summarize(trajectory["contacts"], groups)
 
 
 def render_video(single, trajectory, path: Path, camera: str, width: int, height: int, fps: float):
@@ -231,8 +231,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     (run_dir / "eval.json").write_text(json.dumps(summary, indent=2))
     print(
-        f"{config.task}: success {metrics['eval/success']:.3f} (at the end "
-        f"{metrics['eval/success_final']:.3f}), mean return {metrics['eval/episode_return']:.2f} "
+        f"{config.task}: success at the end {metrics['eval/success_final']:.3f} (at some "
+        f"step {metrics['eval/success']:.3f}), mean return {metrics['eval/episode_return']:.2f} "
         f"over {args.episodes} episodes ({summary['checkpoint']['kind']} checkpoint, epoch {epoch})"
     )
     if profile is not None:

@@ -142,9 +142,18 @@ def reference_at(params: RewardParams, step: jax.Array) -> tuple[jax.Array, jax.
     return offsets, angles, active
 
 
-def success(contacts: jax.Array, required_mask: jax.Array) -> jax.Array:
-    """All required sensors in contact; contacts (..., 15) 0/1, mask (..., 15) -> (...) bool."""
-    return jnp.all((contacts > 0.5) | ~required_mask.astype(bool), axis=-1)
+def success(contacts: jax.Array, groups: jax.Array) -> jax.Array:
+    """One sensor of every success group in contact.
+
+    Args:
+      contacts: (..., 15) 0/1 readings.
+      groups: (..., G, 15) bool, row g the sensors of group g; an empty row is satisfied.
+    Returns:
+      (...) bool.
+    """
+    groups = groups.astype(bool)
+    touching = (contacts[..., None, :] > 0.5) & groups
+    return jnp.all(jnp.any(touching, axis=-1) | ~jnp.any(groups, axis=-1), axis=-1)
 
 
 def compute_rewards(

@@ -47,6 +47,8 @@ class TrainConfig:
     ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
     mocap_source: Literal["auto", "optitrack", "synthetic"] = "auto"
     """Which demonstrations to read."""
+    demos: Literal["authors", "all"] = "authors"
+    """Of the recordings, the demonstrations the authors trained on, or all of them."""
     target_rotation_noise: float = 0.0
     """Std (radians) of a random per-episode rotation of the target hand."""
     physics: Literal["auto", "mjx", "native"] = "auto"
@@ -150,6 +152,7 @@ def make_envs(config: TrainConfig, num_devices: int):
             imitation=config.imitation,
             mocap_source=config.mocap_source,
             mocap_path=config.mocap,
+            demos=config.demos,
             target_rotation_noise=config.target_rotation_noise,
             physics=config.physics,
         )
@@ -234,10 +237,10 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
     evals = [r for r in rows if "eval/success" in r]
     if evals:
         steps = [r["train/env_steps"] for r in evals]
-        ax.plot(steps, [r["eval/success"] for r in evals], "o-", label="contact reached")
         if all("eval/success_final" in r for r in evals):
             finals = [r["eval/success_final"] for r in evals]
-            ax.plot(steps, finals, "s--", label="contact at the end")
+            ax.plot(steps, finals, "o-", lw=2, label="contact at the end (headline)")
+        ax.plot(steps, [r["eval/success"] for r in evals], "s--", alpha=0.7, label="contact at some step")
         ax.legend(loc="best")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation success rate")
@@ -320,6 +323,7 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
+    data.setdefault("demos", "all")  # runs from before the setting used every demonstration
     ddpg = dict(data.pop("ddpg"))
     for key in ("hidden_sizes", "target_clip"):
         if ddpg.get(key) is not None:
@@ -337,6 +341,7 @@ RESUME_FIXED = (
     "imitation",
     "mocap_source",
     "mocap",
+    "demos",
     "physics",
     "num_envs",
     "algo",
@@ -613,7 +618,11 @@ def run_population(
     )
     demos = getattr(single, "demos", None)
     source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
-    where = runs[0].path if len(runs) == 1 else f"{len(runs)} runs in {runs[0].path.parent}"
+    where = (
+        runs[0].path
+        if len(runs) == 1
+        else f"{len(runs)} runs in {os.path.commonpath([str(r.path) for r in runs])}"
+    )
     print(
         f"{config.task}: {source}, {getattr(single, 'backend', '?')} physics, "
         f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
@@ -657,9 +666,11 @@ def run_population(
             common = {
                 "epoch": float(epoch),
                 "time/epoch_seconds": seconds,
-                "time/env_steps_per_second": steps_per_epoch / seconds,
+                "time/env_steps_per_second": steps_per_epoch / seconds,  # this run's
                 "time/wall_seconds": time.perf_counter() - launched,
             }
+            if len(runs) > 1:  # what the machine did: every member's steps
+                common["time/population_env_steps_per_second"] = len(runs) * steps_per_epoch / seconds
             peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
             if peak is not None:  # accelerators count; CPU does not
                 common["memory/device_peak_gib"] = peak / 2**30
@@ -684,7 +695,8 @@ def run_population(
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
             if config.max_minutes is not None:  # whichever budget ends the run first
                 remaining = min(remaining, max(60 * config.max_minutes - elapsed, 0.0))
-            line = _progress_line(epoch, config.epochs, common["time/env_steps_per_second"], rows, labels)
+            rate = len(runs) * common["time/env_steps_per_second"]
+            line = _progress_line(epoch, config.epochs, rate, rows, labels)
             print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
             if evaluate or out_of_time:
                 for i, (r, row) in enumerate(zip(runs, rows)):

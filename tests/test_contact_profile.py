@@ -59,3 +59,24 @@ def test_plot_writes_a_png(tmp_path):
     path = tmp_path / "profile.png"
     contact_profile.plot(contacts, profile, path, "et", dt=0.04)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+
+
+def test_clap_groups_count_fingers_not_sensors():
+    """With the clap's groups a finger counts once whichever of its phalanges touches;
+    success at the end is the last step's share, by explicit loops."""
+    from mjx_hands import reward_params as rp
+
+    groups = rp.success_group_mask("handclap")
+    rng = np.random.default_rng(4)
+    contacts = rng.random((12, 50, len(sh.CONTACT_SENSORS))) < 0.5
+    profile = contact_profile.summarize(contacts, groups)
+    rows = [g for g in groups if g.any()]
+
+    def fingers(t, e):
+        return sum(any(contacts[t, e, s] for s in np.flatnonzero(g)) for g in rows)
+
+    best = [max(fingers(t, e) for t in range(12)) for e in range(50)]
+    assert profile["episodes_by_required_at_once"] == np.bincount(best, minlength=5).tolist()
+    assert profile["success_final"] == pytest.approx(np.mean([fingers(11, e) == 4 for e in range(50)]))
+    assert profile["success"] == pytest.approx(np.mean([b == 4 for b in best]))
+    assert profile["groups"][0] == ["ff_distal", "ff_middle"]

@@ -414,3 +414,21 @@ def test_the_task_registry_is_what_every_module_reads():
         assert np.linalg.det(rot) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="unknown task 'wave'; expected one of handshake"):
         tasks.spec("wave")
+
+
+def test_the_authors_demonstration_subsets_are_selected_by_row():
+    from conftest import real_data_or_skip
+
+    path = real_data_or_skip()
+    from mjx_hands import mocap, tasks
+
+    for task in tasks.TASKS:
+        demos = mocap.load_demonstrations(task, source="optitrack", path=path)
+        chosen = env_lib.select_demos(demos, task, "authors")
+        rows = [int(d.name.rsplit("/", 1)[-1]) for d in chosen]
+        assert rows == list(tasks.spec(task).authors_demos)
+        assert env_lib.select_demos(demos, task, "all") == demos
+    synthetic = mocap.load_demonstrations("handshake", source="synthetic")
+    assert env_lib.select_demos(synthetic, "handshake", "authors") == synthetic
+    with pytest.raises(ValueError, match="unknown demonstration set"):
+        env_lib.select_demos(synthetic, "handshake", "some")

@@ -257,15 +257,17 @@ def test_report_statistics_match_a_hand_computation(tmp_path):
     assert rows["full"]["final_success_end"] == pytest.approx(0.9)
     assert rows["full"]["final_success_end_se"] == pytest.approx(0.1 / math.sqrt(3))
     assert rows["baseline1"]["best_success_end"] == pytest.approx(0.2)  # max(0.1*seed, final)
-    # Welch's t for full vs baseline2: means 0.9 / 0.6, variances 0.01 / 0.01, n = 3.
-    t_hand = (0.9 - 0.6) / math.sqrt(0.01 / 3 + 0.01 / 3)
+    # Welch's t for no_imitation vs baseline2 (statement 1 compares like with like):
+    # means 0.9 / 0.6, sample variances 0.0025 / 0.01, n = 3.
+    a, b = 0.0025 / 3, 0.01 / 3
+    t_hand = (0.9 - 0.6) / math.sqrt(a + b)
+    dof = (a + b) ** 2 / (a**2 / 2 + b**2 / 2)  # Welch-Satterthwaite
     first = result["statements"][0]
-    test = next(t for t in first["tests"] if t["comparison"] == "full vs baseline2")
+    test = next(t for t in first["tests"] if t["comparison"] == "no_imitation vs baseline2")
     assert test["t"] == pytest.approx(t_hand)
-    # Welch-Satterthwaite dof = 4 for equal variances and n = 3: p from Student's t.
     from scipy import stats
 
-    assert test["p"] == pytest.approx(2 * stats.t.sf(t_hand, 4))
+    assert test["p"] == pytest.approx(2 * stats.t.sf(t_hand, dof))
     assert test["verdict"] == "held"
     # E.T. is missing: statement 1 rests on the handshake only, statement 3 is untested.
     assert first["verdict"] == "held"

@@ -288,11 +288,25 @@ def test_variants():
 def test_required_contacts_are_sensors():
     names = rp.shadow_hand.CONTACT_SENSORS
     handshake = rp.required_contact_mask("handshake")
-    assert [names[i] for i in np.flatnonzero(handshake)] == ["ff_middle", "mf_middle", "rf_middle"]
-    assert rp.required_contact_mask("handclap").sum() == 6
+    # The authors' touch sensors: middle phalanges of all five fingers (handshake); distal
+    # and middle of index to little finger (clap); the index fingertip (E.T.).
+    assert [names[i] for i in np.flatnonzero(handshake)] == [
+        f"{f}_middle" for f in ("th", "ff", "mf", "rf", "lf")
+    ]
+    clap = rp.required_contact_mask("handclap")
+    assert sorted(names[i] for i in np.flatnonzero(clap)) == sorted(
+        f"{f}_{p}" for f in ("ff", "mf", "rf", "lf") for p in ("distal", "middle")
+    )
     assert np.flatnonzero(rp.required_contact_mask("et")).tolist() == [3]  # ff_distal
+    assert rp.success_group_mask("handclap").any(-1).sum() == 4  # one group per finger
+    for task in ("handshake", "handclap", "et"):  # the groups cover the rewarded sensors
+        np.testing.assert_array_equal(
+            rp.success_group_mask(task).any(0), rp.required_contact_mask(task)
+        )
     with pytest.raises(ValueError, match="unknown task"):
         rp.required_contact_mask("hug")
+    with pytest.raises(ValueError, match="unknown task"):
+        rp.success_group_mask("hug")
 
 
 def test_touching_fingertip_weight_is_floored():

@@ -12,6 +12,7 @@ from test_reward_params import make_demo
 
 from mjx_hands import reward_params as rp
 from mjx_hands import rewards
+from mjx_hands import shadow_hand as sh
 from mjx_hands.reward_params import RewardParams
 
 L = 7
@@ -43,6 +44,7 @@ def random_params(rng, batch=()) -> RewardParams:
         k_imitation_position=pos(),
         k_imitation_angle=pos(),
         required_contacts=rng.uniform(size=batch + (15,)) < 0.3,
+        success_groups=rng.uniform(size=batch + (rp.N_GROUPS, 15)) < 0.2,
     )
 
 
@@ -198,17 +200,41 @@ def test_imitation_masked_past_length():
 
 
 def test_success_rule():
-    mask = rp.required_contact_mask("handshake")
+    groups = rp.success_group_mask("handshake")  # all five middle phalanges, each alone
+    mask = groups.any(0)
+    assert [sh.CONTACT_SENSORS[i] for i in np.flatnonzero(mask)] == [
+        "th_middle", "ff_middle", "mf_middle", "rf_middle", "lf_middle"
+    ]
     contacts = mask.astype(np.float32)
-    assert bool(rewards.success(contacts, mask))
-    assert bool(rewards.success(np.ones(15, np.float32), mask))  # extra contacts are fine
+    assert bool(rewards.success(contacts, groups))
+    assert bool(rewards.success(np.ones(15, np.float32), groups))  # extra contacts are fine
     for i in np.flatnonzero(mask):
         missing = contacts.copy()
         missing[i] = 0
-        assert not bool(rewards.success(missing, mask))
+        assert not bool(rewards.success(missing, groups))
     batch = np.stack([contacts, np.zeros(15, np.float32), np.ones(15, np.float32)])
-    np.testing.assert_array_equal(rewards.success(batch, mask), [True, False, True])
-    assert bool(rewards.success(np.zeros(15), np.zeros(15, bool)))  # nothing required
+    np.testing.assert_array_equal(rewards.success(batch, groups), [True, False, True])
+    assert bool(rewards.success(np.zeros(15), np.zeros((rp.N_GROUPS, 15), bool)))  # none required
+
+
+def test_clap_success_needs_one_phalanx_of_each_finger():
+    """The authors' clap rule, written out by sensor names, against the group masks."""
+    groups = rp.success_group_mask("handclap")
+    index = {n: i for i, n in enumerate(sh.CONTACT_SENSORS)}
+    contacts = (np.random.default_rng(3).uniform(size=(512, 15)) < 0.55).astype(np.float32)
+    expected = np.all(
+        [
+            (contacts[:, index[f"{f}_distal"]] > 0) | (contacts[:, index[f"{f}_middle"]] > 0)
+            for f in ("ff", "mf", "rf", "lf")
+        ],
+        axis=0,
+    )
+    np.testing.assert_array_equal(rewards.success(contacts, groups), expected)
+    assert 0.05 < expected.mean() < 0.95  # both outcomes occur
+    # The contact term rewards all eight of them; the thumb is in no group.
+    assert set(np.flatnonzero(rp.required_contact_mask("handclap"))) == set(
+        np.flatnonzero(groups.any(0))
+    ) and not groups[:, index["th_distal"]].any()
 
 
 def test_jit_and_vmap_agree():
@@ -223,7 +249,7 @@ def test_jit_and_vmap_agree():
     for term in eager:
         np.testing.assert_allclose(jitted[term], eager[term], rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(vmapped[term], eager[term], rtol=1e-6, atol=1e-6)
-    ok = jax.jit(jax.vmap(rewards.success))(jnp.asarray(x["contacts"]), params.required_contacts)
+    ok = jax.jit(jax.vmap(rewards.success))(jnp.asarray(x["contacts"]), params.success_groups)
     assert ok.shape == (8,)
 
 
