@@ -627,6 +627,40 @@ def apply_index_alignment(demos: list[Demonstration], align: IndexAlignment) -> 
     return out
 
 
+APPROACH_NEAR = 0.10
+"""Metres: a release window whose palms start within this of their closest distance
+(over the window) begins after the approach (every hand clap: 0-7 mm; handshakes
+>= 138 mm, E.T. >= 63 mm)."""
+APPROACH_FAR = 0.20
+"""Metres: such a demonstration starts instead at the last earlier frame where the
+palms were this much farther apart than at their closest."""
+
+
+def approach_start(palm_distance: np.ndarray, start: int, contact_end: int, first: int = 0) -> int:
+    """Where a demonstration begins: the release's ``start``, or earlier when the hands
+    are already together there.
+
+    The hand clap's release windows begin at the clap itself (closest palms, speed ~0,
+    within -17..+3 frames) and end as the hands part: the approach, what the paper's
+    clap result is about, lies before them. The rule is on the palm-to-palm distance
+    alone: if at ``start`` the palms are within ``APPROACH_NEAR`` of their closest over
+    ``[start, contact_end]``, the demonstration starts at the last frame before ``start``
+    at which they were ``APPROACH_FAR`` farther apart (not before ``first``).
+
+    Args:
+      palm_distance: (T,) palm-to-palm distance of the take, metres.
+      start, contact_end: the release's window (frame indices).
+      first: the earliest frame allowed (e.g. the previous demonstration's end).
+    Returns:
+      the start frame (``start`` when no frame since ``first`` is that far out).
+    """
+    closest = float(np.min(palm_distance[start : contact_end + 1]))
+    if palm_distance[start] - closest >= APPROACH_NEAR:
+        return start
+    far = np.flatnonzero(palm_distance[first:start] > closest + APPROACH_FAR)
+    return first + int(far[-1]) if far.size else start  # no approach recorded: as released
+
+
 def load_optitrack(
     task: str,
     root: str | Path | None = None,
@@ -634,6 +668,7 @@ def load_optitrack(
     calibration: PalmCalibration | None = None,
     lead_in: int = 0,
     align_et_index: bool = True,
+    approach: bool = True,
 ) -> list[Demonstration]:
     """The authors' demonstrations of one task, one per row of ``<task>_interaction_t.npy``.
 
@@ -645,6 +680,8 @@ def load_optitrack(
         the handshake and hand-clap takes of ``root`` (:func:`estimate_palm_calibration`).
       lead_in: extra frames before each window's start (the authors' environments also
         started episodes before it); contact indices shift accordingly.
+      approach: begin windows that start with the hands already together (the hand
+        clap's) at the approach instead (:func:`approach_start`).
       align_et_index: for "et", correct the actor palm pose so that the index tips meet
         during contact (:func:`estimate_index_alignment`).
     Returns:
@@ -657,8 +694,13 @@ def load_optitrack(
     cal = calibration if calibration is not None else _cached_calibration(str(root.resolve()))
     c, o = cal.rotation, cal.offset
     demos = []
+    distance = np.linalg.norm(release.palm_vec, axis=-1)
+    previous_end = release.joint_offset
     for row, (s0, c0, c1) in enumerate(release.windows):
         s = max(int(s0) - lead_in, release.joint_offset)
+        if approach:
+            s = min(s, approach_start(distance, int(s0), int(c1), previous_end))
+        previous_end = max(previous_end, int(c1) + 1)
         _check_window_finite(release, row, s, int(c1))
         f = slice(s, c1 + 1)
         # Shadow palm axes in the world: R_mocap @ C^T.  Relative actor pose (target frame):

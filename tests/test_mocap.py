@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import real_data_or_skip
 
-from mjx_hands import hand_kinematics, mocap, synthetic_demos
+from mjx_hands import hand_kinematics, mocap, synthetic_demos, tasks
 from mjx_hands.shadow_hand import HAND_JOINTS, HAND_POINTS
 
 COUNTS = {"handshake": 10, "handclap": 9, "et": 5}
@@ -63,13 +63,25 @@ def test_real_loads_with_schema_and_ranges(real):
             )
 
 
+def test_approach_start_moves_only_windows_that_begin_together():
+    # Palms 0.5 m apart, approaching from frame 100 to 200 (to 0.2 m), together until 260.
+    distance = np.concatenate([np.full(100, 0.5), np.linspace(0.5, 0.2, 100), np.full(60, 0.2)])
+    # A window that starts together at 220 begins where the palms were 0.2 m farther apart.
+    start = mocap.approach_start(distance, 220, 250)
+    assert start < 220 and distance[start] > 0.2 + mocap.APPROACH_FAR
+    assert distance[start + 1] <= 0.2 + mocap.APPROACH_FAR + 1e-12  # the last such frame
+    # One that starts during the approach, far enough out, stays.
+    assert mocap.approach_start(distance, 110, 250) == 110
+    # Never before `first` (e.g. the previous demonstration): none far enough since -> as is.
+    assert mocap.approach_start(distance, 220, 250, first=180) == 220
+
+
 def test_real_palms_approach_and_touch(real):
-    # Approach: palm-centre distance falls towards contact (hand-clap windows start at the
-    # clap, so look 120 frames = 1 s earlier there).
-    root = real_data_or_skip()
+    # Approach: palm-centre distance falls towards contact (the hand clap's release
+    # windows start at the clap; the loader moves them back to the approach).
+    real_data_or_skip()
     for task in mocap.TASKS:
-        demos = mocap.load_optitrack(task, root, lead_in=120) if task == "handclap" else real[task]
-        for d in demos:
+        for d in real[task]:
             dist = np.linalg.norm(d.actor_points[:, 0], axis=-1)
             assert dist[0] > dist[d.contact_begin] + 0.05, d.name
     # Contact: handshake palms close; handshake and clap palms a palm thickness apart
@@ -88,6 +100,24 @@ def test_real_palms_approach_and_touch(real):
             d.actor_points[d.contact_begin, FF] - d.target_points[d.contact_begin, FF]
         )
         assert tips < 0.03, d.name
+
+
+def test_real_clap_demonstrations_begin_with_their_approach(real):
+    root = real_data_or_skip()
+    from mjx_hands import reward_params as rp
+
+    for d in real["handclap"]:
+        dist = np.linalg.norm(d.actor_points[:, 0], axis=-1)
+        closest = int(np.argmin(dist[: d.contact_end + 1]))
+        assert closest / d.fps > 0.75, d.name  # >= 0.75 s of approach before the clap
+        assert rp.imitation_length(d) >= 25, d.name  # imitated over >= 1 s, was 3-11 steps
+    # Handshake and E.T. windows already begin with the approach: the rule leaves the
+    # rows the authors trained on as the release has them.
+    for task in ("handshake", "et"):
+        plain = mocap.load_optitrack(task, root, approach=False)
+        for d, p in zip(real[task], plain):
+            if int(d.name[-2:]) in tasks.spec(task).authors_demos:
+                assert d.num_frames == p.num_frames, d.name
 
 
 def test_real_fingertip_order_and_calibration():
