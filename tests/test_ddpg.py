@@ -218,6 +218,25 @@ TWO_DEVICE_SCRIPT = textwrap.dedent(
     (result,) = algo.evaluate(state, jax.random.PRNGKey(3))
     print("EVAL", result["eval/success"], result["eval/episode_return"], metrics[0]["train/env_steps"])
     assert result["eval/success"] > 0.9, result
+    # A population of two on the same two devices: after an epoch, member 0 (seed 0) is
+    # the run alone (later, float rounding grows: Adam turns sign noise on near-zero
+    # gradients into learning-rate-sized steps); both members learn.
+    alone, _ = algo.run_epoch(algo.init(jax.random.PRNGKey(0)))
+    pair = DDPG(make_point_reach(16), POINT_CONFIG, episode_length=20, members=2)
+    pop = pair.init(np.stack([np.asarray(jax.random.PRNGKey(s)) for s in (0, 7)]))
+    pop, _ = pair.run_epoch(pop)
+    first = jax.tree.leaves(jax.device_get(alone.learner.actor_params))
+    mine = jax.tree.leaves(jax.device_get(pop.learner.actor_params))
+    for a, b in zip(mine, first):
+        np.testing.assert_allclose(a[:, 0], b[:, 0], rtol=1e-5, atol=1e-5)
+    for _ in range(11):
+        pop, _ = pair.run_epoch(pop)
+    mine = jax.tree.leaves(jax.device_get(pop.learner.actor_params))
+    assert all(np.array_equal(p[0], p[1]) for p in mine), "population replicas diverged"
+    assert max(np.abs(p[0, 0] - p[0, 1]).max() for p in mine) > 1e-3  # distinct members
+    evals = pair.evaluate(pop, np.stack([np.asarray(jax.random.PRNGKey(3))] * 2))
+    assert min(e["eval/success"] for e in evals) > 0.9, evals
+    print("POPULATION ok")
     """
 )
 
@@ -238,7 +257,7 @@ def test_two_cpu_devices_train_in_step(tmp_path):
         timeout=600,
     )
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
-    assert "EVAL" in result.stdout
+    assert "EVAL" in result.stdout and "POPULATION ok" in result.stdout
 
 
 @pytest.mark.slow
