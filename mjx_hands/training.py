@@ -348,6 +348,7 @@ RESUME_FIXED = (
     "ddpg.hidden_sizes",
     "ddpg.layer_norm",
     "ddpg.batch_norm",
+    "ddpg.twin_critics",
     "ddpg.replay_capacity",
 )
 

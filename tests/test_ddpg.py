@@ -92,6 +92,73 @@ def test_critic_target_matches_bellman_equation():
     )
 
 
+def test_twin_critics_target_takes_the_smaller_target_q_and_sum_their_errors():
+    """losses.critic_loss with a two-critic ensemble against a NumPy transcription."""
+    rng = np.random.default_rng(1)
+    n = 32
+    batch = replay.Transition(
+        obs=rng.normal(size=(n, 3)).astype(np.float32),
+        action=rng.uniform(-1, 1, (n, 2)).astype(np.float32),
+        reward=rng.normal(size=n).astype(np.float32),
+        discount=(rng.random(n) > 0.2).astype(np.float32),
+        next_obs=rng.normal(size=(n, 3)).astype(np.float32),
+    )
+    w_actor = rng.normal(size=(3, 2)).astype(np.float32)
+    w_critic = rng.normal(size=(2, 5)).astype(np.float32)  # two linear critics on [obs, act]
+    actor = lambda p, obs: jnp.tanh(obs @ p)
+    critics = lambda p, obs, act: jnp.concatenate([obs, act], -1) @ p.T  # -> (batch, 2)
+    ensemble = lambda p, obs, act: critics(p, obs, act).T  # (2, batch)
+    online = w_critic + 0.1
+    loss, (metrics, _) = losses.critic_loss(
+        online, w_actor, w_critic, batch, actor_apply=actor, critic_apply=ensemble, gamma=0.9
+    )
+    next_a = np.tanh(batch.next_obs @ w_actor)
+    next_q = (np.concatenate([batch.next_obs, next_a], -1) @ w_critic.T).min(-1)
+    target = batch.reward + 0.9 * batch.discount * next_q
+    q = np.concatenate([batch.obs, batch.action], -1) @ online.T  # (batch, 2)
+    expected = ((q - target[:, None]) ** 2).mean(0).sum()
+    np.testing.assert_allclose(loss, expected, rtol=1e-5)
+    np.testing.assert_allclose(metrics["target_q"], target.mean(), rtol=1e-5, atol=1e-6)
+
+
+def test_target_policy_smoothing_noise_is_clipped():
+    action = jnp.asarray(np.linspace(-1, 1, 4000).reshape(2000, 2), jnp.float32)
+    key = jax.random.PRNGKey(3)
+    got = np.asarray(losses.smoothed_action(action, key, noise=5.0, noise_clip=0.3))
+    eps = np.clip(5.0 * np.asarray(jax.random.normal(key, action.shape)), -0.3, 0.3)
+    np.testing.assert_allclose(got, np.clip(np.asarray(action) + eps, -1, 1), atol=1e-6)
+    assert np.abs(got - np.asarray(action)).max() <= 0.3 + 1e-6
+    assert (np.abs(eps) == 0.3).mean() > 0.9  # sigma 5 hits the clip almost always
+
+
+def test_delayed_actor_updates_once_per_interval():
+    """With actor_update_interval 4 the actor's optimiser counts a quarter of the critic's
+    updates; the default updates both every step."""
+    for interval in (1, 4):
+        config = dataclasses.replace(
+            POINT_CONFIG, actor_update_interval=interval, updates_per_iteration=8,
+            iterations_per_epoch=2, min_replay_size=160, twin_critics=True,
+            target_policy_noise=0.2,
+        )
+        algo = DDPG(make_point_reach(16), config, episode_length=20)
+        state, _ = algo.run_epoch(algo.init(jax.random.PRNGKey(0)))
+        learner = jax.tree.map(lambda x: np.asarray(x)[0, 0], state.learner)
+        critic_count = int(learner.critic_opt_state[0].count)
+        actor_count = int(learner.actor_opt_state[0].count)
+        assert critic_count == int(learner.updates) > 0
+        assert actor_count == critic_count // interval
+        # Two critics, initialised apart.
+        kernel = jax.tree.leaves(learner.critic_params)[-1]
+        assert kernel.shape[0] == 2 and not np.allclose(kernel[0], kernel[1])
+
+
+def test_invalid_td3_options_are_refused():
+    with pytest.raises(ValueError, match="actor_update_interval must divide"):
+        DDPGConfig(updates_per_iteration=10, actor_update_interval=3)
+    with pytest.raises(ValueError, match="twin_critics does not combine with batch_norm"):
+        DDPGConfig(twin_critics=True, batch_norm=True)
+
+
 def test_collected_transitions_bootstrap_truncation_but_not_termination():
     """A truncated step keeps discount 1 and its true last observation; a terminal step 0."""
     n, length = 6, 4
@@ -141,6 +208,20 @@ def _episode_return(env, policy, key) -> float:
         state = env.step(state, policy(state))
         total += float(state.reward.mean())
     return total
+
+
+TD3_OPTIONS = {"twin_critics": True, "target_policy_noise": 0.2, "actor_update_interval": 2}
+
+
+@pytest.mark.slow
+def test_td3_options_solve_point_reaching():
+    config = dataclasses.replace(POINT_CONFIG, **TD3_OPTIONS)
+    algo = DDPG(make_point_reach(32), config, episode_length=20)
+    state = algo.init(jax.random.PRNGKey(0))
+    for _ in range(12):
+        state, _ = algo.run_epoch(state)
+    (evaluation,) = algo.evaluate(state, jax.random.PRNGKey(3))
+    assert evaluation["eval/success"] > 0.9, evaluation
 
 
 @pytest.fixture(scope="module")

@@ -68,18 +68,27 @@ def _learner(run_dir: Path) -> dict:
     return tree
 
 
+TD3 = dataclasses.replace(
+    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2
+)
+
+
 @pytest.mark.slow
-def test_resume_equals_an_uninterrupted_run(tmp_path):
-    full = training.run(_config(tmp_path / "full"), out=io.StringIO(), env_factory=point_factory)
+@pytest.mark.parametrize("ddpg", [SMALL, TD3], ids=["ddpg", "td3_options"])
+def test_resume_equals_an_uninterrupted_run(tmp_path, ddpg):
+    full = training.run(
+        _config(tmp_path / "full", ddpg=ddpg), out=io.StringIO(), env_factory=point_factory
+    )
     assert full["epochs"] == 4 and full["last_checkpoint"] == 4
 
     half = training.run(
-        _config(tmp_path / "split", epochs=2), out=io.StringIO(), env_factory=point_factory
+        _config(tmp_path / "split", epochs=2, ddpg=ddpg), out=io.StringIO(),
+        env_factory=point_factory,
     )
     assert half["last_checkpoint"] == 2
     log = io.StringIO()
     resumed = training.run(
-        _config(tmp_path / "split", resume=True), out=log, env_factory=point_factory
+        _config(tmp_path / "split", resume=True, ddpg=ddpg), out=log, env_factory=point_factory
     )
     assert "resumed from epoch 2" in log.getvalue()
     assert resumed["epochs"] == 4

@@ -2,7 +2,9 @@
 
 Critic: squared error to ``y = r + γ · discount · Q'(s', μ'(s'))`` with target
 networks μ', Q'; ``discount`` is 0 only at a true termination, so truncated
-episodes bootstrap. Actor: ``-Q(s, μ(s)) + λ · mean(μ(s)²)``.
+episodes bootstrap. Actor: ``-Q(s, μ(s)) + λ · mean(μ(s)²)``. Options of TD3
+(Fujimoto et al. 2018): two critics whose minimum makes the target, and a target
+action smoothed by clipped noise.
 
 The network being trained runs through a *train apply* ``(variables, *inputs) ->
 (output, new_variables)``, which lets batch normalisation use minibatch statistics
@@ -35,6 +37,14 @@ def critic_target(
     return jax.lax.stop_gradient(target)
 
 
+def smoothed_action(
+    action: jax.Array, rng: jax.Array, noise: float, noise_clip: float
+) -> jax.Array:
+    """TD3's target policy smoothing: ``clip(a + clip(σ·ε, -c, c), -1, 1)``, ε ~ N(0, 1)."""
+    eps = jnp.clip(noise * jax.random.normal(rng, action.shape), -noise_clip, noise_clip)
+    return jnp.clip(action + eps, -1.0, 1.0)
+
+
 def critic_loss(
     critic_params,
     target_actor_params,
@@ -46,18 +56,25 @@ def critic_loss(
     gamma: float,
     target_clip: tuple[float, float] | None = None,
     critic_train_apply: Apply | None = None,
+    smoothing: tuple[jax.Array, float, float] | None = None,
 ):
-    """Mean squared Bellman error on normalised ``batch`` (leaves (batch, ...)).
+    """Squared Bellman error on normalised ``batch`` (leaves (batch, ...)), summed over
+    the critics of an ensemble.
 
+    ``critic_apply`` returns (critics, batch) values: one critic is the paper's DDPG;
+    with two the target takes their minimum (TD3's clipped double Q). ``smoothing``
+    (key, σ, clip) perturbs the target action (:func:`smoothed_action`).
     Returns (loss, (metrics, critic variables after the forward pass)).
     """
     next_action = actor_apply(target_actor_params, batch.next_obs)
-    next_q = critic_apply(target_critic_params, batch.next_obs, next_action)
+    if smoothing is not None:
+        next_action = smoothed_action(next_action, *smoothing)
+    next_q = critic_apply(target_critic_params, batch.next_obs, next_action).min(axis=0)
     target = critic_target(batch.reward, batch.discount, next_q, gamma, target_clip)
     train_apply = critic_train_apply or _plain(critic_apply)
-    q, new_variables = train_apply(critic_params, batch.obs, batch.action)
-    loss = jnp.mean(jnp.square(q - target))
-    metrics = {"critic_loss": loss, "q": q.mean(), "target_q": target.mean()}
+    q, new_variables = train_apply(critic_params, batch.obs, batch.action)  # (critics, batch)
+    loss = jnp.sum(jnp.mean(jnp.square(q - target), axis=-1))
+    metrics = {"critic_loss": loss, "q": q[0].mean(), "target_q": target.mean()}
     return loss, (metrics, new_variables)
 
 
@@ -72,11 +89,12 @@ def actor_loss(
     actor_train_apply: Apply | None = None,
 ):
     """``-mean Q(s, μ(s)) + action_l2 · mean(μ(s)²)``; obs (batch, obs) normalised.
+    ``critic_apply`` returns (critics, batch); the first critic drives the actor (TD3).
 
     Returns (loss, (metrics, actor variables after the forward pass)).
     """
     action, new_variables = (actor_train_apply or _plain(actor_apply))(actor_params, obs)
-    q = critic_apply(critic_params, obs, action)
+    q = critic_apply(critic_params, obs, action)[0]
     penalty = action_l2 * jnp.mean(jnp.square(action))
     loss = -q.mean() + penalty
     return loss, ({"actor_loss": loss, "action_penalty": penalty}, new_variables)

@@ -82,6 +82,18 @@ class DDPGConfig:
     """Normalised observations are clipped to ±this."""
     target_clip: tuple[float, float] | None = None
     """Optional clip of the Bellman target (e.g. the return's known range)."""
+    twin_critics: bool = False
+    """Two critics trained on the same target, which takes the smaller of their target
+    values (TD3's clipped double Q: against the critic's overestimation); the first
+    critic drives the actor."""
+    target_policy_noise: float = 0.0
+    """Std of Gaussian noise on the target actor's action in the Bellman target (TD3's
+    target policy smoothing, 0.2 there; 0: off)."""
+    target_noise_clip: float = 0.5
+    """The smoothing noise is clipped to ±this."""
+    actor_update_interval: int = 1
+    """The actor updates with every this many critic updates (TD3's delayed policy
+    updates, 2 there); must divide ``updates_per_iteration``."""
 
     def __post_init__(self):
         checks = {
@@ -97,11 +109,22 @@ class DDPGConfig:
             "discount": self.discount is None or 0.0 <= self.discount <= 1.0,
             "actor_learning_rate": self.actor_learning_rate > 0,
             "critic_learning_rate": self.critic_learning_rate > 0,
+            "target_policy_noise": self.target_policy_noise >= 0.0,
+            "target_noise_clip": self.target_noise_clip >= 0.0,
+            "actor_update_interval": self.actor_update_interval > 0
+            and self.updates_per_iteration % self.actor_update_interval == 0,
+            # Batch statistics of an ensemble's members are not carried: refuse the pair.
+            "twin_critics": not (self.twin_critics and self.batch_norm),
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
             values = ", ".join(f"{n}={getattr(self, n)!r}" for n in bad)
-            raise ValueError(f"invalid DDPG config: {values}")
+            raise ValueError(
+                f"invalid DDPG config: {values} (actor_update_interval must divide "
+                "updates_per_iteration; twin_critics does not combine with batch_norm)"
+                if {"actor_update_interval", "twin_critics"} & set(bad)
+                else f"invalid DDPG config: {values}"
+            )
 
 
 @struct.dataclass
@@ -248,6 +271,12 @@ class DDPG:
         """Deterministic action (..., act) of one run's learner for observations (..., obs)."""
         return self.actor.apply(learner.actor_params, self.normalize(learner, obs))
 
+    def critic_values(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """Q of every critic: (critics, ...) for normalised obs (..., obs), action (..., act)."""
+        if self.config.twin_critics:
+            return jax.vmap(lambda p: self.critic.apply(p, obs, action))(critic_params)
+        return self.critic.apply(critic_params, obs, action)[None]
+
     def _explore(self, learner: LearnerState, obs: jax.Array, rng: jax.Array) -> jax.Array:
         k_noise, k_random, k_pick = jax.random.split(rng, 3)
         action = self.policy(learner, obs)
@@ -305,7 +334,12 @@ class DDPG:
         obs = jnp.zeros((1, self.env.observation_size))
         act = jnp.zeros((1, self.env.action_size))
         actor_params = self.actor.init(k_actor, obs)
-        critic_params = self.critic.init(k_critic, obs, act)
+        if self.config.twin_critics:  # stacked: leaves (2, ...)
+            critic_params = jax.vmap(lambda k: self.critic.init(k, obs, act))(
+                jax.random.split(k_critic)
+            )
+        else:
+            critic_params = self.critic.init(k_critic, obs, act)
         return LearnerState(
             actor_params=actor_params,
             critic_params=critic_params,
@@ -448,20 +482,37 @@ class DDPG:
 
     def _zero_sgd_metrics(self) -> dict[str, jax.Array]:
         keys = ("critic_loss", "q", "target_q", "actor_loss", "action_penalty")
-        zero = jnp.zeros((self.members, self.config.updates_per_iteration))
+        cfg = self.config
+        zero = jnp.zeros((self.members, cfg.updates_per_iteration // cfg.actor_update_interval))
         return {f"sgd/{k}": zero for k in keys}
 
     def _train(self, learner: LearnerState, buffer: replay.ReplayBuffer, rng: jax.Array):
         """``updates_per_iteration`` SGD updates, then a Polyak step of the targets (one run)."""
-        per_device = self.config.batch_size // self.num_devices
+        cfg = self.config
+        per_device = cfg.batch_size // self.num_devices
+        smooth = cfg.target_policy_noise > 0
 
-        def update(learner: LearnerState, key):
-            batch = replay.sample(buffer, key, per_device)
-            return self.sgd_step(learner, batch)
+        def update(learner: LearnerState, key, actor: bool = True):
+            # Keys split only for the options that need them: the paper's DDPG draws
+            # exactly the minibatches it always drew.
+            k_batch, k_noise = jax.random.split(key) if smooth else (key, None)
+            batch = replay.sample(buffer, k_batch, per_device)
+            return self.sgd_step(learner, batch, k_noise, actor=actor)
 
-        learner, metrics = jax.lax.scan(
-            update, learner, jax.random.split(rng, self.config.updates_per_iteration)
-        )
+        keys = jax.random.split(rng, cfg.updates_per_iteration)
+        interval = cfg.actor_update_interval
+        if interval == 1:
+            learner, metrics = jax.lax.scan(update, learner, keys)
+        else:
+            # Blocks of (interval - 1) critic updates, then one of critic and actor.
+            def block(learner: LearnerState, block_keys):
+                learner, _ = jax.lax.scan(
+                    functools.partial(update, actor=False), learner, block_keys[:-1]
+                )
+                return update(learner, block_keys[-1])
+
+            blocks = keys.reshape((-1, interval) + keys.shape[1:])
+            learner, metrics = jax.lax.scan(block, learner, blocks)
         learner = learner.replace(
             target_actor_params=losses.polyak(
                 learner.target_actor_params, learner.actor_params, self.config.polyak
@@ -472,61 +523,85 @@ class DDPG:
         )
         return learner, metrics
 
-    def sgd_step(self, learner: LearnerState, batch: replay.Transition):
-        """One critic and one actor update on ``batch`` (leaves (per-device batch, ...))."""
+    def sgd_step(
+        self,
+        learner: LearnerState,
+        batch: replay.Transition,
+        noise_key: jax.Array | None = None,
+        actor: bool = True,
+    ):
+        """One critic update and (with ``actor``) one actor update on ``batch`` (leaves
+        (per-device batch, ...)); both gradients are taken at the current parameters.
+        ``noise_key`` draws the target policy smoothing noise (when that is on)."""
+        cfg = self.config
         batch = batch.replace(
             obs=self.normalize(learner, batch.obs), next_obs=self.normalize(learner, batch.next_obs)
         )
+        smoothing = None
+        if cfg.target_policy_noise > 0:
+            smoothing = (noise_key, cfg.target_policy_noise, cfg.target_noise_clip)
         critic_grad, (critic_metrics, critic_vars) = jax.grad(losses.critic_loss, has_aux=True)(
             learner.critic_params,
             learner.target_actor_params,
             learner.target_critic_params,
             batch,
             actor_apply=self.actor.apply,
-            critic_apply=self.critic.apply,
+            critic_apply=self.critic_values,
             gamma=self.gamma,
-            target_clip=self.config.target_clip,
-            critic_train_apply=self._train_apply(self.critic),
+            target_clip=cfg.target_clip,
+            critic_train_apply=self._train_apply(self.critic, ensemble_axis=True),
+            smoothing=smoothing,
         )
-        actor_grad, (actor_metrics, actor_vars) = jax.grad(losses.actor_loss, has_aux=True)(
-            learner.actor_params,
-            learner.critic_params,
-            batch.obs,
-            actor_apply=self.actor.apply,
-            critic_apply=self.critic.apply,
-            action_l2=self.config.action_l2,
-            actor_train_apply=self._train_apply(self.actor),
-        )
-        critic_grad, actor_grad = jax.lax.pmean((critic_grad, actor_grad), AXIS)
+        critic_grad = jax.lax.pmean(critic_grad, AXIS)
         critic_updates, critic_opt_state = self.critic_opt.update(
             critic_grad, learner.critic_opt_state
         )
-        actor_updates, actor_opt_state = self.actor_opt.update(actor_grad, learner.actor_opt_state)
         critic_params = optax.apply_updates(learner.critic_params, critic_updates)
-        actor_params = optax.apply_updates(learner.actor_params, actor_updates)
-        if self.config.batch_norm:
-            # Running averages of the minibatch statistics, the same on every device.
-            stats = jax.lax.pmean((critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS)
-            critic_params = critic_params | {"batch_stats": stats[0]}
-            actor_params = actor_params | {"batch_stats": stats[1]}
+        metrics = critic_metrics
+        if actor:
+            actor_grad, (actor_metrics, actor_vars) = jax.grad(losses.actor_loss, has_aux=True)(
+                learner.actor_params,
+                learner.critic_params,
+                batch.obs,
+                actor_apply=self.actor.apply,
+                critic_apply=self.critic_values,
+                action_l2=cfg.action_l2,
+                actor_train_apply=self._train_apply(self.actor),
+            )
+            actor_grad = jax.lax.pmean(actor_grad, AXIS)
+            actor_updates, actor_opt_state = self.actor_opt.update(
+                actor_grad, learner.actor_opt_state
+            )
+            actor_params = optax.apply_updates(learner.actor_params, actor_updates)
+            metrics = metrics | actor_metrics
+            if cfg.batch_norm:
+                # Running averages of the minibatch statistics, the same on every device.
+                stats = jax.lax.pmean(
+                    (critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS
+                )
+                critic_params = critic_params | {"batch_stats": stats[0]}
+                actor_params = actor_params | {"batch_stats": stats[1]}
+            learner = learner.replace(actor_params=actor_params, actor_opt_state=actor_opt_state)
+        elif cfg.batch_norm:
+            stats = jax.lax.pmean(critic_vars["batch_stats"], AXIS)
+            critic_params = critic_params | {"batch_stats": stats}
         learner = learner.replace(
             critic_params=critic_params,
-            actor_params=actor_params,
             critic_opt_state=critic_opt_state,
-            actor_opt_state=actor_opt_state,
             updates=learner.updates + 1,
         )
-        metrics = jax.lax.pmean(critic_metrics | actor_metrics, AXIS)
+        metrics = jax.lax.pmean(metrics, AXIS)
         return learner, {f"sgd/{k}": v for k, v in metrics.items()}
 
-    def _train_apply(self, module):
-        """Forward pass in training mode: (variables, *inputs) -> (output, new variables)."""
+    def _train_apply(self, module, ensemble_axis: bool = False):
+        """Forward pass in training mode: (variables, *inputs) -> (output, new variables);
+        ``ensemble_axis`` adds the critics' leading axis (one critic with batch norm)."""
         if not self.config.batch_norm:
             return None
 
         def apply(variables, *inputs):
             out, updates = module.apply(variables, *inputs, train=True, mutable=["batch_stats"])
-            return out, variables | updates
+            return (out[None] if ensemble_axis else out), variables | updates
 
         return apply
 
