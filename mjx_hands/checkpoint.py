@@ -73,11 +73,15 @@ def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
     return dict(restored["metadata"])
 
 
-def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[str, Any]]:
+def restore(
+    directory: Path, like, step: int | None = None, partial: bool = False
+) -> tuple[Any, dict[str, Any]]:
     """Load checkpoint ``step`` (default: latest) into the structure of ``like``.
 
     ``like`` is a state built from the current config (its values are ignored); the
-    checkpoint must have the same leaves with the same shapes and dtypes.
+    checkpoint must have the same leaves with the same shapes and dtypes. With
+    ``partial``, ``like`` may be a part of what was saved (e.g. only the learner of a
+    whole training state): its leaves are found by path.
     Returns the restored state (host numpy leaves) and the metadata.
     """
     step = _resolve_step(directory, step)
@@ -91,12 +95,25 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
         for _, x in with_path
     ]
     saved = metadata.get("leaves", [])
-    if len(saved) != len(paths):
+    if partial:
+        index_of = {entry["path"]: i for i, entry in enumerate(saved)}
+        missing = [p for p in paths if p not in index_of]
+        if missing:
+            raise CheckpointError(
+                f"checkpoint {directory} step {step} lacks {missing[0]} (and "
+                f"{len(missing) - 1} more arrays) that the current configuration needs"
+            )
+        indices = [index_of[p] for p in paths]
+    elif len(saved) != len(paths):
         raise CheckpointError(
             f"checkpoint {directory} step {step} has {len(saved)} arrays but the current "
-            f"configuration needs {len(paths)}: it was written by an incompatible config"
+            f"configuration needs {len(paths)}: it was written by an incompatible config "
+            "or an older version (evaluate still opens its policy)"
         )
-    for entry, path, leaf in zip(saved, paths, leaves):
+    else:
+        indices = list(range(len(paths)))
+    for i, path, leaf in zip(indices, paths, leaves):
+        entry = saved[i]
         if (
             entry["path"] != path
             or tuple(entry["shape"]) != tuple(leaf.shape)
@@ -107,22 +124,37 @@ def restore(directory: Path, like, step: int | None = None) -> tuple[Any, dict[s
                 f"configuration: it holds {entry['path']} {entry['dtype']}{tuple(entry['shape'])}, "
                 f"the config expects {path} {leaf.dtype}{tuple(leaf.shape)}"
             )
-    abstract = {
-        f"leaf_{i:05d}": jax.ShapeDtypeStruct(leaf.shape, leaf.dtype)
-        for i, leaf in enumerate(leaves)
-        if np.prod(leaf.shape)
-    }
+    wanted = [(i, leaf) for i, leaf in zip(indices, leaves) if np.prod(leaf.shape)]
+    abstract = {f"leaf_{i:05d}": jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for i, leaf in wanted}
     with _manager(directory) as manager:
-        restored = manager.restore(
-            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
-        )
+        args = ocp.args.StandardRestore(abstract)
+        if partial:  # read only the arrays it names
+            args = ocp.args.PyTreeRestore(
+                item=abstract,
+                restore_args=jax.tree.map(lambda _: ocp.RestoreArgs(restore_type=np.ndarray), abstract),
+                partial_restore=True,
+            )
+        restored = manager.restore(step, args=ocp.args.Composite(state=args))
     arrays = [
         np.asarray(restored["state"][f"leaf_{i:05d}"])
         if np.prod(leaf.shape)
         else np.zeros(leaf.shape, leaf.dtype)
-        for i, leaf in enumerate(leaves)
+        for i, leaf in zip(indices, leaves)
     ]
     return jax.tree_util.tree_unflatten(treedef, arrays), metadata
+
+
+def discard_after(directory: Path, step: int) -> list[int]:
+    """Delete the checkpoints of ``directory`` newer than ``step`` (a population resumes
+    from the epoch all its members saved); returns the deleted steps."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    with _manager(directory) as manager:
+        newer = [s for s in manager.all_steps() if s > step]
+        for s in newer:
+            manager.delete(s)
+    return newer
 
 
 def _resolve_step(directory: Path, step: int | None) -> int:

@@ -534,7 +534,8 @@ class HandInteractionEnv(Env):
             "palm_goal_distance": goal_distance[0],
             "fingertip_goal_distance": goal_distance[1:].mean(),
         }
-        metrics |= {f"pose/{k}": jnp.where(finite, v, 0.0) for k, v in pose.items()}
+        # NaN, not 0 m, after a divergence: blowing up is no way to the goal (means skip it).
+        metrics |= {f"pose/{k}": jnp.where(finite, v, jnp.nan) for k, v in pose.items()}
         info = dict(state.info)
         info.update(
             episode=episode,

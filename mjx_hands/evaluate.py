@@ -59,12 +59,17 @@ class EvalArgs:
 
 
 def restore_run(
-    run_dir: Path, step: int | None = None, eval_envs: int | None = None, best: bool = False
+    run_dir: Path,
+    step: int | None = None,
+    eval_envs: int | None = None,
+    best: bool = False,
+    learner_only: bool = False,
 ):
     """(algo, checkpoint tree, config, single env) of a run's checkpoint; nothing compiled.
 
     The tree is what training saved: ``learner``, ``env_state`` (leaves with a leading
-    device axis), ...; with ``best``, the best evaluation's ``learner`` only.
+    device axis), ...; with ``best`` or ``learner_only``, the ``learner`` only (read by
+    path, so checkpoints whose environment state has another layout still load).
     ``eval_envs`` overrides the run's evaluation batch.
     """
     ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
@@ -88,11 +93,12 @@ def restore_run(
         )
     algo, single = training.make_learner(config, devices=devices)
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
-    if meta.get("contents") == "policy":
+    partial = learner_only or meta.get("contents") == "policy"
+    if partial:
         like_tree = training.policy_tree(like)
     else:
         like_tree = training.checkpoint_tree(like, config.save_replay)
-    tree, _ = checkpoint.restore(ckpt_dir, like_tree, step)
+    tree, _ = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial)
     return algo, tree, config, single
 
 
@@ -100,7 +106,7 @@ def load_policy(
     run_dir: Path, step: int | None = None, eval_envs: int = 128, best: bool = False
 ):
     """(algo, unreplicated learner, config, single env, epoch) of a run's checkpoint."""
-    algo, tree, config, single = restore_run(run_dir, step, eval_envs, best)
+    algo, tree, config, single = restore_run(run_dir, step, eval_envs, best, learner_only=True)
     ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
     epoch = int(checkpoint.read_metadata(ckpt_dir, step)["epoch"])
     return algo, tree["learner"], config, single, epoch

@@ -115,9 +115,12 @@ def _grid_default(argv: list[str]) -> GridConfig:
         path = Path(run_dir) / GRID_FILE
         if not path.is_file():
             raise FileNotFoundError(f"--resume: no grid to continue in {run_dir} ({GRID_FILE} missing)")
-        saved = json.loads(path.read_text())
-        train = dataclasses.replace(training.config_from_json(saved["train"]), resume=False)
-        return GridConfig(variants=tuple(saved["variants"]), seeds=saved["seeds"], train=train)
+        try:
+            saved = json.loads(path.read_text())
+            train = dataclasses.replace(training.config_from_json(saved["train"]), resume=False)
+            return GridConfig(variants=tuple(saved["variants"]), seeds=saved["seeds"], train=train)
+        except (json.JSONDecodeError, KeyError, TypeError) as err:
+            raise ValueError(f"{path} is not a grid record this version reads: {err!r}") from err
     return GridConfig(train=training.preset(train_cli.option(argv, "--preset") or "auto"))
 
 
@@ -143,7 +146,9 @@ def run_grid(grid: GridConfig, out=sys.stdout, env_factory=None) -> list[dict[st
                 f"--resume: {run_dir} holds another grid ({len(saved['members'])} members of "
                 f"{', '.join(saved['variants'])}); resume it without --variants/--seeds/--seed"
             )
-    elif (run_dir / GRID_FILE).exists():
+    elif (run_dir / GRID_FILE).exists() and any(
+        (Path(c.run_dir) / "config.json").exists() for _, c in pairs
+    ):
         raise FileExistsError(
             f"{run_dir} already holds a grid; pass --resume to continue it or choose another --run-dir"
         )
@@ -212,6 +217,7 @@ def welch(a, b) -> tuple[float, float]:
     from scipy import stats
 
     a, b = np.asarray(a, float), np.asarray(b, float)
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
     if len(a) < 2 or len(b) < 2:
         return math.nan, math.nan
     if a.std() == 0 and b.std() == 0:
@@ -341,15 +347,18 @@ def _compare(summary, task, a, b, metric, better: str) -> dict[str, Any]:
 
 
 def _combine(parts: list[dict[str, Any]]) -> str:
-    """held if every tested part held; not held if any part contradicts; else not significant."""
+    """held if every tested part held; not held if any part contradicts; else not
+    significant; "(partly tested)" when some parts had no runs."""
     verdicts = [p["verdict"] for p in parts if p["verdict"] != "not tested"]
     if not verdicts:
         return "not tested"
     if "not held" in verdicts:
-        return "not held"
-    if all(v == "held" for v in verdicts):
-        return "held"
-    return "not significant"
+        verdict = "not held"
+    elif all(v == "held" for v in verdicts):
+        verdict = "held"
+    else:
+        verdict = "not significant"
+    return verdict + (" (partly tested)" if len(verdicts) < len(parts) else "")
 
 
 def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -387,7 +396,8 @@ def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
     else:
         from scipy import stats
 
-        n, mean, se = clap["n_seeds"], clap["final_success_end"], clap["final_success_end_se"]
+        finite = [v for v in clap["final_success_end_values"] if math.isfinite(v)]
+        n, mean, se = len(finite), clap["final_success_end"], clap["final_success_end_se"]
         half = float(stats.t.ppf(1 - ALPHA / 2, n - 1) * se) if n > 1 else math.nan
         low, high = mean - half, mean + half
         if not math.isfinite(half):
@@ -413,12 +423,15 @@ def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
     if not tested:
         verdict = "not tested"
     elif all(p["verdict"] == "not significant" for p in tested):
-        verdict = "held"
+        verdict = "held"  # no significant difference: consistent, not a proof of equality
     else:
         verdict = "not held"
+    if tested and len(tested) < len(parts):
+        verdict += " (partly tested)"
     out.append({
         "statement": "4. Adding imitation does not significantly change success rates "
-        f"(Welch's t-test, p >= {ALPHA}, per task).",
+        f"(Welch's t-test, p >= {ALPHA}, per task; with few seeds a weak test, not one of "
+        "equivalence).",
         "verdict": verdict,
         "tests": parts,
     })

@@ -699,7 +699,14 @@ def load_optitrack(
     for row, (s0, c0, c1) in enumerate(release.windows):
         s = max(int(s0) - lead_in, release.joint_offset)
         if approach:
-            s = min(s, approach_start(distance, int(s0), int(c1), previous_end))
+            earlier = approach_start(distance, int(s0), int(c1), previous_end)
+            span = slice(earlier, int(s0))  # capture dropouts there: keep the release's start
+            recorded = [
+                getattr(release, name)[span]
+                for name in ("palm_vec", "actor_joints", "target_joints", "actor_rot", "target_rot")
+            ]
+            if all(np.isfinite(x).all() for x in recorded):
+                s = min(s, earlier)
         previous_end = max(previous_end, int(c1) + 1)
         _check_window_finite(release, row, s, int(c1))
         f = slice(s, c1 + 1)

@@ -9,6 +9,7 @@ resume from), ``best/`` (the policy of the best evaluation so far) and ``success
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import json
@@ -375,17 +376,45 @@ def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) 
             )
 
 
-def _interrupt_on_sigterm():
-    """Make SIGTERM (``kill``, batch schedulers, and the only stop signal a job started in
-    the background with ``&`` receives: its SIGINT is ignored) stop training like Ctrl-C.
-    Returns the previous handler, or None off the main thread (where none can be set)."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
+class Interrupts:
+    """Ctrl-C and SIGTERM stop training with a KeyboardInterrupt, but never in the middle
+    of saving: a population's members save one after another, and a stop between two of
+    them would leave the run directories at different epochs. SIGTERM matters: ``kill``,
+    batch schedulers, and the only stop signal a job started in the background with ``&``
+    receives (its SIGINT is ignored). Off the main thread nothing is installed."""
 
-    def interrupt(signum, frame):
+    def __init__(self):
+        self.pending: int | None = None
+        self.saving = False
+        self.previous: dict[int, Any] = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self.previous[sig] = signal.signal(sig, self._handle)
+
+    def uninstall(self) -> None:
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+        self.previous = {}
+
+    def _handle(self, signum, frame):
+        if self.saving:
+            self.pending = signum
+            return
         raise KeyboardInterrupt(f"signal {signum}")
 
-    return signal.signal(signal.SIGTERM, interrupt)
+    @contextlib.contextmanager
+    def deferred(self):
+        """Hold a stop until the block (e.g. the saves of one epoch) is done."""
+        self.saving = True
+        try:
+            yield
+        finally:
+            self.saving = False
+        if self.pending is not None:
+            raise KeyboardInterrupt(f"signal {self.pending}")
 
 
 class TrainingDiverged(RuntimeError):
@@ -541,16 +570,29 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
     return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
 
 
-def _check_finite(epoch: int, metrics: list[dict[str, float]], runs: list[RunDirectory]) -> None:
-    for metrics_m, run_m in zip(metrics, runs):
+def _newly_diverged(
+    epoch: int, metrics: list[dict[str, float]], runs: list[RunDirectory], diverged: set[int]
+) -> list[int]:
+    """Members whose losses or parameters turned non-finite this epoch. A run alone stops
+    (TrainingDiverged); in a population the others train on (members share no numbers),
+    and the diverged one keeps its last good checkpoint and logs no more."""
+    new = []
+    for index, (metrics_m, run_m) in enumerate(zip(metrics, runs)):
         bad = sorted(k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v))
-        if bad or metrics_m["train/params_finite"] < 1.0:
+        if index in diverged or not (bad or metrics_m["train/params_finite"] < 1.0):
+            continue
+        message = (
+            f"epoch {epoch}: training diverged (non-finite {bad or 'parameters'}) in "
+            f"{run_m.path}; the last good checkpoint (epoch {run_m.last_saved}) is in "
+            f"{run_m.checkpoints}"
+        )
+        if len(runs) == 1:
             raise TrainingDiverged(
-                f"epoch {epoch}: training diverged (non-finite {bad or 'parameters'}) in "
-                f"{run_m.path}; the last good checkpoint (epoch {run_m.last_saved}) is in "
-                f"{run_m.checkpoints}; lower the learning rates or enable --ddpg.layer-norm "
-                "and --resume"
+                message + "; lower the learning rates or enable --ddpg.layer-norm and --resume"
             )
+        new.append(index)
+        print(f"{message}; the other members train on", file=sys.stderr, flush=True)
+    return new
 
 
 def _progress_line(epoch: int, epochs: int, rate: float, rows: list[dict], labels: list[str]) -> str:
@@ -639,7 +681,10 @@ def run_population(
         if any(s is None for s in saved):
             missing = [str(r.path) for r, s in zip(runs, saved) if s is None]
             raise checkpoint.CheckpointError(f"--resume: no checkpoint in {', '.join(missing)}")
-        start_epoch = min(saved)  # members save together; a kill mid-save leaves some ahead
+        start_epoch = min(saved)  # members save together; a crash mid-save leaves some ahead
+        for r in runs:  # ... whose newer checkpoints the resumed run will write again
+            checkpoint.discard_after(r.checkpoints, start_epoch)
+            checkpoint.discard_after(r.best_dir, start_epoch)
         trees = [r.restore(state, i, start_epoch) for i, r in enumerate(runs)]
         state = _from_checkpoint_trees(trees, state, algo)
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
@@ -650,7 +695,9 @@ def run_population(
     steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
     started = time.perf_counter()
     stop_reason = "epochs"
-    previous_sigterm = _interrupt_on_sigterm()
+    diverged: set[int] = set()
+    interrupts = Interrupts()
+    interrupts.install()
     if start_epoch < config.epochs:
         print(
             "compiling the training epoch (once; MJX on 2 CPU cores takes minutes, native "
@@ -663,7 +710,9 @@ def run_population(
             t0 = time.perf_counter()
             state, metrics = algo.run_epoch(state)
             seconds = time.perf_counter() - t0
-            _check_finite(epoch, metrics, runs)
+            diverged.update(_newly_diverged(epoch, metrics, runs, diverged))
+            if len(diverged) == len(runs):
+                raise TrainingDiverged(f"epoch {epoch}: every member of the population diverged")
             common = {
                 "epoch": float(epoch),
                 "time/epoch_seconds": seconds,
@@ -691,8 +740,9 @@ def run_population(
                     ]
                 )
                 rows = [row | e for row, e in zip(rows, algo.evaluate(state, keys))]
-            for r, row in zip(runs, rows):
-                r.log.append(row)
+            for i, (r, row) in enumerate(zip(runs, rows)):
+                if i not in diverged:
+                    r.log.append(row)
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
             if config.max_minutes is not None:  # whichever budget ends the run first
                 remaining = min(remaining, max(60 * config.max_minutes - elapsed, 0.0))
@@ -700,9 +750,12 @@ def run_population(
             line = _progress_line(epoch, config.epochs, rate, rows, labels)
             print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
             if evaluate or out_of_time:
-                for i, (r, row) in enumerate(zip(runs, rows)):
-                    r.save(state, i, epoch, algo.num_devices)
-                    r.save_if_best(state, i, epoch, row, algo.num_devices)
+                with interrupts.deferred():
+                    for i, (r, row) in enumerate(zip(runs, rows)):
+                        if i in diverged:
+                            continue
+                        r.save(state, i, epoch, algo.num_devices)
+                        r.save_if_best(state, i, epoch, row, algo.num_devices)
             if out_of_time:
                 stop_reason = "max_minutes"
                 break
@@ -714,8 +767,7 @@ def run_population(
             file=out,
         )
     finally:
-        if previous_sigterm is not None:
-            signal.signal(signal.SIGTERM, previous_sigterm)
+        interrupts.uninstall()
         for r in runs:
             r.close()
     return [

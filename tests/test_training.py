@@ -458,6 +458,23 @@ def test_checkpoint_round_trips_empty_and_nested_arrays(tmp_path):
         np.testing.assert_array_equal(x, y)
 
 
+def test_checkpoint_part_is_read_by_path_and_newer_steps_can_be_discarded(tmp_path):
+    """evaluate reads only the learner (so an older environment-state layout still
+    opens); a population drops steps some members saved beyond the others."""
+    tree = {"learner": {"w": np.arange(6.0).reshape(2, 3)}, "env": {"x": np.ones(4)}}
+    for step in (1, 2, 3):
+        checkpoint.save(tmp_path, step, tree, {"epoch": step})
+    part, meta = checkpoint.restore(tmp_path, {"learner": {"w": np.zeros((2, 3))}}, partial=True)
+    np.testing.assert_array_equal(part["learner"]["w"], tree["learner"]["w"])
+    assert meta["epoch"] == 3
+    with pytest.raises(checkpoint.CheckpointError, match=r"lacks \['learner'\]\['v'\]"):
+        checkpoint.restore(tmp_path, {"learner": {"v": np.zeros(2)}}, partial=True)
+    with pytest.raises(checkpoint.CheckpointError, match="has 2 arrays but"):
+        checkpoint.restore(tmp_path, {"learner": {"w": np.zeros((2, 3))}})
+    assert checkpoint.discard_after(tmp_path, 1) == [2, 3]
+    assert checkpoint.latest_step(tmp_path) == 1
+
+
 def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     from mjx_hands import train_cli
 

@@ -448,8 +448,10 @@ class DDPG:
                 (learner.actor_params, learner.critic_params)
             ).astype(jnp.float32),
         }
-        # Environment metrics (reward terms, ...) averaged over the epoch's steps.
-        metrics |= {f"env/{k}": mean(v) for k, v in finished["env_metrics"].items()}
+        # Environment metrics (reward terms, ...) averaged over the epoch's steps; NaN
+        # entries (e.g. pose distances of diverged simulations) are left out.
+        nanmean = lambda x: jax.lax.pmean(jnp.nanmean(x, axis=(0, 1, 3)), AXIS)
+        metrics |= {f"env/{k}": nanmean(v) for k, v in finished["env_metrics"].items()}
         # SGD metrics of the epoch's last iteration (the most recent networks).
         metrics |= {k: v[-1].mean(axis=-1) for k, v in sgd_metrics.items()}
         return state, metrics
@@ -622,6 +624,10 @@ class DDPG:
         rng = jnp.asarray(rng)
         if rng.ndim == 1:
             rng = rng[None]
+        if rng.shape[0] != self.members:
+            raise ValueError(
+                f"evaluate needs one key per member ({self.members}), got {rng.shape}"
+            )
         rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
         keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
         metrics = self._evaluate(learner, jnp.swapaxes(keys, 0, 1))
@@ -644,7 +650,7 @@ class DDPG:
             "eval/success_final": success[-1].mean(axis=-1),
         }
         metrics |= {
-            f"eval/final_{k.removeprefix('pose/')}": v.mean(axis=-1)
+            f"eval/final_{k.removeprefix('pose/')}": jnp.nanmean(v, axis=-1)
             for k, v in final.metrics.items()
             if k.startswith("pose/")
         }
