@@ -32,6 +32,7 @@ def _batch(n: int) -> replay.Transition:
         reward=jnp.ones(n),
         discount=jnp.ones(n),
         next_obs=jax.random.normal(k[0], (n, OBS)),
+        last=jnp.zeros(n),
     )
 
 

@@ -69,7 +69,7 @@ def _learner(run_dir: Path) -> dict:
 
 
 TD3 = dataclasses.replace(
-    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2
+    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2, n_step=3
 )
 
 

@@ -94,6 +94,9 @@ class DDPGConfig:
     actor_update_interval: int = 1
     """The actor updates with every this many critic updates (TD3's delayed policy
     updates, 2 there); must divide ``updates_per_iteration``."""
+    n_step: int = 1
+    """Steps of reward summed before bootstrapping (``replay.sample_n_step``: stops at
+    an episode's end, bootstraps after a truncation but not a termination)."""
 
     def __post_init__(self):
         checks = {
@@ -109,6 +112,7 @@ class DDPGConfig:
             "discount": self.discount is None or 0.0 <= self.discount <= 1.0,
             "actor_learning_rate": self.actor_learning_rate > 0,
             "critic_learning_rate": self.critic_learning_rate > 0,
+            "n_step": self.n_step >= 1,
             "target_policy_noise": self.target_policy_noise >= 0.0,
             "target_noise_clip": self.target_noise_clip >= 0.0,
             "actor_update_interval": self.actor_update_interval > 0
@@ -365,6 +369,7 @@ class DDPG:
             reward=jnp.zeros(()),
             discount=jnp.zeros(()),
             next_obs=env_state.obs[0, 0],
+            last=jnp.zeros(()),
         )
         buffer = replay.create(self.config.replay_capacity // self.num_devices, example)
         buffer = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.members,) + x.shape), buffer)
@@ -410,7 +415,9 @@ class DDPG:
             ready = buffer.size[0] * self.num_devices >= cfg.min_replay_size
             learner, sgd_metrics = jax.lax.cond(
                 ready,
-                lambda learner: jax.vmap(self._train)(learner, buffer, k_sgd),
+                lambda learner: jax.vmap(
+                    functools.partial(self._train, num_envs=env_state.reward.shape[1])
+                )(learner, buffer, k_sgd),
                 lambda learner: (learner, self._zero_sgd_metrics()),
                 learner,
             )
@@ -469,6 +476,7 @@ class DDPG:
             reward=next_state.reward,
             discount=1.0 - done * (1.0 - truncation),
             next_obs=next_state.info["terminal_obs"],
+            last=done,
         )
         episode_return = stats.episode_return + next_state.reward
         episode_success = jnp.maximum(stats.episode_success, next_state.info["success"])
@@ -488,8 +496,11 @@ class DDPG:
         zero = jnp.zeros((self.members, cfg.updates_per_iteration // cfg.actor_update_interval))
         return {f"sgd/{k}": zero for k in keys}
 
-    def _train(self, learner: LearnerState, buffer: replay.ReplayBuffer, rng: jax.Array):
-        """``updates_per_iteration`` SGD updates, then a Polyak step of the targets (one run)."""
+    def _train(
+        self, learner: LearnerState, buffer: replay.ReplayBuffer, rng: jax.Array, num_envs: int
+    ):
+        """``updates_per_iteration`` SGD updates, then a Polyak step of the targets (one
+        run); ``num_envs``: this device's environments of the run (the buffer's stride)."""
         cfg = self.config
         per_device = cfg.batch_size // self.num_devices
         smooth = cfg.target_policy_noise > 0
@@ -498,7 +509,12 @@ class DDPG:
             # Keys split only for the options that need them: the paper's DDPG draws
             # exactly the minibatches it always drew.
             k_batch, k_noise = jax.random.split(key) if smooth else (key, None)
-            batch = replay.sample(buffer, k_batch, per_device)
+            if cfg.n_step > 1:
+                batch = replay.sample_n_step(
+                    buffer, k_batch, per_device, cfg.n_step, self.gamma, num_envs
+                )
+            else:
+                batch = replay.sample(buffer, k_batch, per_device)
             return self.sgd_step(learner, batch, k_noise, actor=actor)
 
         keys = jax.random.split(rng, cfg.updates_per_iteration)
