@@ -367,8 +367,9 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
     assert video[4:8] == b"ftyp" and len(video) > 5000
     # The contact profile, from the sensor readings, agrees with the env's success flag.
     profile = summary["contact_profile"]
-    assert profile["required"] == ["ff_middle", "mf_middle", "rf_middle"]
+    assert profile["required"] == [f"{f}_middle" for f in ("th", "ff", "mf", "rf", "lf")]
     assert profile["success"] == summary["eval/success"]
+    assert profile["success_final"] == summary["eval/success_final"]
     assert sum(profile["episodes_by_required_at_once"]) == 8
     assert len(profile["all_required_over_time"]) == 100
     assert (run_dir / "contact_profile.png").stat().st_size > 5000
