@@ -450,7 +450,8 @@ def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
 
     fig, axes = plt.subplots(2, len(grids), figsize=(4.5 * len(grids), 7), squeeze=False)
     for column, grid in enumerate(grids):
-        for variant, c in curves(grid).items():
+        grid_curves = curves(grid)
+        for variant, c in grid_curves.items():
             color = COLORS.get(variant)
             label = f"{variant} (n={c['n']})"
             for row, x in enumerate((c["env_steps"], c["wall_seconds"] / 60)):
@@ -465,7 +466,8 @@ def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
             ax.grid(alpha=0.3)
             ax.set_ylabel("success at the end of the episode")
         axes[0, column].ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
-        axes[0, column].legend(loc="best", fontsize=8)
+        if grid_curves:
+            axes[0, column].legend(loc="best", fontsize=8)
     fig.suptitle("Evaluation success at the last step, mean +- SE over seeds")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
