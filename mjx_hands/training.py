@@ -326,7 +326,7 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
     ddpg = dict(data.pop("ddpg"))
-    for key in ("hidden_sizes", "target_clip"):
+    for key in ("hidden_sizes", "target_clip", "value_range"):
         if ddpg.get(key) is not None:
             ddpg[key] = tuple(ddpg[key])
     return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
@@ -350,6 +350,7 @@ RESUME_FIXED = (
     "ddpg.layer_norm",
     "ddpg.batch_norm",
     "ddpg.twin_critics",
+    "ddpg.num_atoms",
     "ddpg.replay_capacity",
 )
 

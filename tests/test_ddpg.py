@@ -153,6 +153,34 @@ def test_trainer_stores_each_environments_next_step_one_env_count_later():
     assert follows.sum() > 0 and (~follows).sum() > 0  # episodes of 5 steps end inside
 
 
+def test_c51_projection_matches_a_loop_over_atoms():
+    """losses.categorical_projection against the textbook loop (Bellemare et al. 2017)."""
+    rng = np.random.default_rng(11)
+    batch, atoms, v_min, v_max = 64, 11, -10.0, 10.0
+    support = np.linspace(v_min, v_max, atoms)
+    probs = rng.dirichlet(np.ones(atoms), batch)
+    reward = rng.normal(0, 6, batch)  # some shifted returns fall beyond the support
+    discount = 0.95 * (rng.random(batch) > 0.2)  # 0: a termination, all mass at r
+    reward[:4] = [2.0, -10.0, 10.0, 37.0]  # exactly on atoms, and beyond v_max
+    got = losses.categorical_projection(
+        jnp.asarray(probs), jnp.asarray(reward), jnp.asarray(discount), jnp.asarray(support)
+    )
+    delta = (v_max - v_min) / (atoms - 1)
+    want = np.zeros((batch, atoms))
+    for i in range(batch):
+        for j in range(atoms):
+            tz = min(max(reward[i] + discount[i] * support[j], v_min), v_max)
+            b = (tz - v_min) / delta
+            lo, hi = int(np.floor(b)), int(np.ceil(b))
+            if lo == hi:
+                want[i, lo] += probs[i, j]
+            else:
+                want[i, lo] += probs[i, j] * (hi - b)
+                want[i, hi] += probs[i, j] * (b - lo)
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(got).sum(-1), 1.0, atol=1e-5)  # mass kept
+
+
 def test_twin_critics_target_takes_the_smaller_target_q_and_sum_their_errors():
     """losses.critic_loss with a two-critic ensemble against a NumPy transcription."""
     rng = np.random.default_rng(1)
@@ -279,8 +307,9 @@ def _episode_return(env, policy, key) -> float:
         ({"twin_critics": True, "target_policy_noise": 0.2, "actor_update_interval": 2}, 12),
         # Uncorrected n-step returns of exploring actions are biased: slower here.
         ({"n_step": 3}, 16),
+        ({"num_atoms": 51, "value_range": (-40.0, 5.0)}, 12),
     ],
-    ids=["td3", "n_step"],
+    ids=["td3", "n_step", "c51"],
 )
 def test_learner_options_solve_point_reaching(options, epochs):
     config = dataclasses.replace(POINT_CONFIG, **options)

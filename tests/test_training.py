@@ -68,8 +68,9 @@ def _learner(run_dir: Path) -> dict:
     return tree
 
 
-TD3 = dataclasses.replace(
-    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2, n_step=3
+TD3 = dataclasses.replace(  # every learner option at once
+    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2, n_step=3,
+    num_atoms=11, value_range=(-40.0, 5.0),
 )
 
 

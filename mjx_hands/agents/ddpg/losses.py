@@ -4,7 +4,8 @@ Critic: squared error to ``y = r + γ · discount · Q'(s', μ'(s'))`` with targ
 networks μ', Q'; ``discount`` is 0 only at a true termination, so truncated
 episodes bootstrap. Actor: ``-Q(s, μ(s)) + λ · mean(μ(s)²)``. Options of TD3
 (Fujimoto et al. 2018): two critics whose minimum makes the target, and a target
-action smoothed by clipped noise.
+action smoothed by clipped noise; and C51's categorical return distribution (Bellemare
+et al. 2017) in place of the critic's scalar.
 
 The network being trained runs through a *train apply* ``(variables, *inputs) ->
 (output, new_variables)``, which lets batch normalisation use minibatch statistics
@@ -75,6 +76,72 @@ def critic_loss(
     q, new_variables = train_apply(critic_params, batch.obs, batch.action)  # (critics, batch)
     loss = jnp.sum(jnp.mean(jnp.square(q - target), axis=-1))
     metrics = {"critic_loss": loss, "q": q[0].mean(), "target_q": target.mean()}
+    return loss, (metrics, new_variables)
+
+
+def categorical_projection(
+    next_probs: jax.Array, reward: jax.Array, discount: jax.Array, support: jax.Array
+) -> jax.Array:
+    """C51's projection of ``r + discount · z`` onto the fixed support (Bellemare et al.).
+
+    Args:
+      next_probs: (batch, atoms) probabilities of the next return on ``support``.
+      reward: (batch,); discount: (batch,) the factor of the next return (γ · d).
+      support: (atoms,) evenly spaced returns from v_min to v_max.
+    Returns:
+      (batch, atoms): each shifted atom's mass split between its two neighbours on the
+      support, in proportion to closeness (all of it to one where it lands exactly);
+      returns beyond the support count at its ends.
+    """
+    v_min, v_max = support[0], support[-1]
+    delta = (v_max - v_min) / (support.shape[0] - 1)
+    shifted = jnp.clip(reward[:, None] + discount[:, None] * support[None], v_min, v_max)
+    b = (shifted - v_min) / delta  # (batch, atoms) fractional index
+    lower = jnp.floor(b)
+    upper = jnp.ceil(b)
+    # Mass to the lower neighbour: (upper - b), or all of it when b sits on an atom.
+    to_lower = jnp.where(upper == lower, 1.0, upper - b)
+    to_upper = 1.0 - to_lower
+    atoms = jnp.arange(support.shape[0])
+    onto = lambda index, share: jnp.einsum(
+        "ba,bak->bk", next_probs * share, (index[..., None] == atoms).astype(next_probs.dtype)
+    )
+    return onto(lower, to_lower) + onto(upper, to_upper)
+
+
+def distributional_critic_loss(
+    critic_params,
+    target_actor_params,
+    target_critic_params,
+    batch: Transition,
+    *,
+    actor_apply: Apply,
+    critic_logits: Apply,
+    support: jax.Array,
+    gamma: float,
+    critic_train_apply: Apply | None = None,
+    smoothing: tuple[jax.Array, float, float] | None = None,
+):
+    """Cross-entropy of each critic's return distribution to the projected target
+    (C51), summed over the critics; ``critic_logits`` returns (critics, batch, atoms).
+    With two critics the target distribution is the one whose mean is smaller.
+    Returns (loss, (metrics, critic variables after the forward pass)).
+    """
+    next_action = actor_apply(target_actor_params, batch.next_obs)
+    if smoothing is not None:
+        next_action = smoothed_action(next_action, *smoothing)
+    next_probs = jax.nn.softmax(critic_logits(target_critic_params, batch.next_obs, next_action))
+    next_mean = next_probs @ support  # (critics, batch)
+    pick = jnp.argmin(next_mean, axis=0)  # (batch,) the critic with the smaller mean
+    chosen = jnp.take_along_axis(next_probs, pick[None, :, None], axis=0)[0]
+    target = jax.lax.stop_gradient(
+        categorical_projection(chosen, batch.reward, gamma * batch.discount, support)
+    )
+    train_apply = critic_train_apply or _plain(critic_logits)
+    logits, new_variables = train_apply(critic_params, batch.obs, batch.action)
+    loss = -jnp.sum(jnp.mean(jnp.sum(target * jax.nn.log_softmax(logits), axis=-1), axis=-1))
+    q = jax.nn.softmax(logits[0]) @ support
+    metrics = {"critic_loss": loss, "q": q.mean(), "target_q": (target @ support).mean()}
     return loss, (metrics, new_variables)
 
 

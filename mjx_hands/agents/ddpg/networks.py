@@ -65,18 +65,24 @@ class Actor(nn.Module):
 
 
 class Critic(nn.Module):
-    """Q(s, a): normalised observation (..., obs), action (..., act) -> (...,)."""
+    """Q(s, a): normalised observation (..., obs), action (..., act) -> (...,); with
+    ``num_atoms`` > 1 the logits (..., num_atoms) of a categorical return distribution."""
 
     hidden_sizes: Sequence[int] = (256, 256, 256)
     layer_norm: bool = False
     batch_norm: bool = False
     batch_axis_name: str | None = None
+    num_atoms: int = 1
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array, train: bool = False) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
-        mlp = MLP(self.hidden_sizes, 1, self.layer_norm, self.batch_norm, self.batch_axis_name)
-        return mlp(x, train)[..., 0]
+        mlp = MLP(
+            self.hidden_sizes, self.num_atoms, self.layer_norm, self.batch_norm,
+            self.batch_axis_name,
+        )
+        out = mlp(x, train)
+        return out[..., 0] if self.num_atoms == 1 else out
 
 
 @struct.dataclass

@@ -97,6 +97,14 @@ class DDPGConfig:
     n_step: int = 1
     """Steps of reward summed before bootstrapping (``replay.sample_n_step``: stops at
     an episode's end, bootstraps after a truncation but not a termination)."""
+    num_atoms: int = 1
+    """1: the critic is a scalar Q (DDPG). More: a C51 distributional critic, a
+    categorical distribution over this many returns evenly spaced on ``value_range``
+    (51 in C51), trained by cross-entropy to its projected Bellman target; the actor
+    follows its mean."""
+    value_range: tuple[float, float] = (-100.0, 100.0)
+    """(v_min, v_max) of the distributional critic's support: the returns it can
+    represent (the hand tasks' per-step rewards lie within about -2..1)."""
 
     def __post_init__(self):
         checks = {
@@ -113,6 +121,8 @@ class DDPGConfig:
             "actor_learning_rate": self.actor_learning_rate > 0,
             "critic_learning_rate": self.critic_learning_rate > 0,
             "n_step": self.n_step >= 1,
+            "num_atoms": self.num_atoms >= 1,
+            "value_range": self.value_range[0] < self.value_range[1],
             "target_policy_noise": self.target_policy_noise >= 0.0,
             "target_noise_clip": self.target_noise_clip >= 0.0,
             "actor_update_interval": self.actor_update_interval > 0
@@ -251,8 +261,9 @@ class DDPG:
             env.action_size, config.hidden_sizes, config.layer_norm, config.batch_norm, AXIS
         )
         self.critic = networks.Critic(
-            config.hidden_sizes, config.layer_norm, config.batch_norm, AXIS
+            config.hidden_sizes, config.layer_norm, config.batch_norm, AXIS, config.num_atoms
         )
+        self.support = jnp.linspace(*config.value_range, config.num_atoms)  # C51's returns
         self.actor_opt = optax.adam(config.actor_learning_rate)
         self.critic_opt = optax.adam(config.critic_learning_rate)
         self.trace_count = 0
@@ -275,11 +286,17 @@ class DDPG:
         """Deterministic action (..., act) of one run's learner for observations (..., obs)."""
         return self.actor.apply(learner.actor_params, self.normalize(learner, obs))
 
-    def critic_values(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
-        """Q of every critic: (critics, ...) for normalised obs (..., obs), action (..., act)."""
+    def critic_outputs(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """Every critic's output for normalised obs (..., obs), action (..., act): Q
+        (critics, ...), or a distributional critic's logits (critics, ..., atoms)."""
         if self.config.twin_critics:
             return jax.vmap(lambda p: self.critic.apply(p, obs, action))(critic_params)
         return self.critic.apply(critic_params, obs, action)[None]
+
+    def critic_values(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """Q of every critic, (critics, ...): a distributional critic's mean."""
+        out = self.critic_outputs(critic_params, obs, action)
+        return jax.nn.softmax(out) @ self.support if self.config.num_atoms > 1 else out
 
     def _explore(self, learner: LearnerState, obs: jax.Array, rng: jax.Array) -> jax.Array:
         k_noise, k_random, k_pick = jax.random.split(rng, 3)
@@ -558,15 +575,23 @@ class DDPG:
         smoothing = None
         if cfg.target_policy_noise > 0:
             smoothing = (noise_key, cfg.target_policy_noise, cfg.target_noise_clip)
-        critic_grad, (critic_metrics, critic_vars) = jax.grad(losses.critic_loss, has_aux=True)(
+        if cfg.num_atoms > 1:
+            critic_loss = functools.partial(
+                losses.distributional_critic_loss,
+                critic_logits=self.critic_outputs,
+                support=self.support,
+            )
+        else:
+            critic_loss = functools.partial(
+                losses.critic_loss, critic_apply=self.critic_values, target_clip=cfg.target_clip
+            )
+        critic_grad, (critic_metrics, critic_vars) = jax.grad(critic_loss, has_aux=True)(
             learner.critic_params,
             learner.target_actor_params,
             learner.target_critic_params,
             batch,
             actor_apply=self.actor.apply,
-            critic_apply=self.critic_values,
             gamma=self.gamma,
-            target_clip=cfg.target_clip,
             critic_train_apply=self._train_apply(self.critic, ensemble_axis=True),
             smoothing=smoothing,
         )
