@@ -163,20 +163,27 @@ def make_envs(config: TrainConfig, num_devices: int):
     return train_env, eval_env, single
 
 
-def make_learner(config: TrainConfig, devices=None, env_factory=None) -> tuple[DDPG, Any]:
+def make_learner(
+    config: TrainConfig, devices=None, env_factory=None, population: list | None = None
+) -> tuple[DDPG, Any]:
     """The DDPG learner of ``config`` and its single (unbatched) environment.
 
     ``env_factory(config, num_devices) -> (train_env, eval_env, single_env)`` replaces
     the hand environment (tests train the point-reach task through the same loop).
+    ``population``: the configs of every member (``config`` is the first), each with its
+    reward variant as data; None trains ``config`` alone.
     """
     num_devices = len(devices or jax.local_devices())  # this host's share of the batch
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
+    members = population or [config]
     algo = DDPG(
         train_env,
         config.ddpg,
         episode_length=single.episode_length,
         eval_env=eval_env,
         devices=devices,
+        members=len(members),
+        member_info=member_variants(single, members),
     )
     return algo, single
 
@@ -650,16 +657,7 @@ def run_population(
         r.check()
     labels = labels or [str(r.path) for r in runs]
     print(f"building the {config.task} environment and learner ...", file=out, flush=True)
-    num_devices = len(jax.local_devices())  # this host's share of the batch
-    train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
-    algo = DDPG(
-        train_env,
-        config.ddpg,
-        episode_length=single.episode_length,
-        eval_env=eval_env,
-        members=len(configs),
-        member_info=member_variants(single, configs),
-    )
+    algo, single = make_learner(config, env_factory=env_factory, population=configs)
     demos = getattr(single, "demos", None)
     source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
     where = (

@@ -108,13 +108,10 @@ def test_reward_variants_are_data_and_members_are_independent():
         v: _hand_config(reward=v, seed=s, run_dir=f"unused/{v}")
         for v, s in (("full", 0), ("baseline1", 1), ("baseline2", 1))
     }
-    num_devices = len(jax.local_devices())
 
     def population(names: list[str]):
         cs = [configs[n] for n in names]
-        train_env, eval_env, single = training.make_envs(cs[0], num_devices)
-        algo = DDPG(train_env, HAND, episode_length=single.episode_length, eval_env=eval_env,
-                    members=len(cs), member_info=training.member_variants(single, cs))
+        algo, _ = training.make_learner(cs[0], population=cs)
         state, history = _train(algo, [c.seed for c in cs], epochs=2)
         evals = algo.evaluate(state, np.stack([np.asarray(jax.random.PRNGKey(9))] * len(cs)))
         return state, history, evals
