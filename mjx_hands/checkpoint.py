@@ -5,12 +5,24 @@ numpy, the device axis kept) and a JSON record of the run config, the epoch, and
 path, shape and dtype of every leaf. Restoring checks that record against the state
 the current config builds, so a checkpoint of another task, network size, batch or
 device count is refused with a message naming the first mismatch instead of failing
-deep inside Orbax. Orbax writes each step to a temporary folder and renames it when
-complete, so a crash during a save leaves the previous checkpoint intact.
+deep inside Orbax.
+
+Integrity: Orbax writes each step to a temporary folder and renames it when complete;
+once it has, :func:`save` writes ``digest.json`` (the SHA-256 of every file) into the
+step, last. A step is *intact* when every file matches its digest. Without a step
+named, reading takes the newest intact step, with a :class:`CheckpointWarning` naming
+what is wrong with each newer one (truncated, altered or missing file, unfinished
+save); a named step that is not intact is refused with the same message. Steps written
+before digests existed (no ``format`` in their record) are read unverified.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import shutil
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +33,16 @@ import orbax.checkpoint as ocp
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, unreadable, or does not fit the current configuration."""
+
+
+class CheckpointWarning(UserWarning):
+    """A damaged or unfinished checkpoint was skipped for an older, intact one."""
+
+
+FORMAT = 2
+"""Written into every record; steps with a format are verified against their digest."""
+DIGEST_FILE = "digest.json"
+METADATA_FILE = Path("metadata") / "metadata"  # Orbax's JsonSave of the record
 
 
 def _leaves(tree) -> tuple[list[str], list[np.ndarray], Any]:
@@ -34,13 +56,11 @@ def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
-def save(
-    directory: Path, step: int, state, metadata: dict[str, Any], max_to_keep: int = 3
-) -> None:
+def save(directory: Path, step: int, state, metadata: dict[str, Any], max_to_keep: int = 3) -> None:
     """Write ``state`` (any pytree of arrays) and ``metadata`` (JSON-able) as ``step``;
     the oldest steps beyond ``max_to_keep`` are deleted once it is complete."""
     paths, leaves, _ = _leaves(jax.device_get(state))
-    record = dict(metadata)
+    record = dict(metadata) | {"format": FORMAT}
     record["leaves"] = [
         {"path": p, "shape": list(x.shape), "dtype": str(x.dtype)} for p, x in zip(paths, leaves)
     ]
@@ -54,22 +74,123 @@ def save(
             ),
         )
         manager.wait_until_finished()
+    _write_digest(Path(directory).absolute() / str(step))
+
+
+def _file_digests(step_dir: Path) -> dict[str, str]:
+    """SHA-256 of every file under ``step_dir`` but the digest itself, by relative path."""
+    digests = {}
+    for file in sorted(step_dir.rglob("*")):
+        if file.is_file() and file.name != DIGEST_FILE:
+            with open(file, "rb") as f:
+                digests[file.relative_to(step_dir).as_posix()] = hashlib.file_digest(
+                    f, "sha256"
+                ).hexdigest()
+    return digests
+
+
+def _write_digest(step_dir: Path) -> None:
+    """Write the step's digest last, atomically: its presence marks the save complete."""
+    tmp = step_dir / (DIGEST_FILE + ".tmp")
+    tmp.write_text(json.dumps({"sha256": _file_digests(step_dir)}, indent=1))
+    os.replace(tmp, step_dir / DIGEST_FILE)
+
+
+def steps(directory: Path) -> list[int]:
+    """Every finalised step in ``directory`` (intact or not), oldest first. Unfinished
+    Orbax saves (temporary folders) are not steps."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    return sorted(int(p.name) for p in directory.iterdir() if p.is_dir() and p.name.isdigit())
+
+
+def damage(directory: Path, step: int) -> str | None:
+    """What is wrong with checkpoint ``step`` (None: intact, or written before digests).
+
+    Checks every file against the step's digest: missing, truncated or altered files,
+    and a save that did not finish (a record but no digest)."""
+    step_dir = Path(directory) / str(step)
+    if not step_dir.is_dir():
+        return f"{step_dir} does not exist"
+    digest_file = step_dir / DIGEST_FILE
+    if not digest_file.is_file():
+        try:
+            record = json.loads((step_dir / METADATA_FILE).read_text())
+        except (OSError, ValueError) as err:
+            return f"{step_dir / METADATA_FILE} is unreadable ({err}) and there is no digest"
+        if isinstance(record, dict) and "format" not in record:
+            return None  # written before digests: nothing to verify against
+        return f"{step_dir} is unfinished: its save stopped before the digest was written"
+    try:
+        expected = json.loads(digest_file.read_text())["sha256"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        return f"{digest_file} is unreadable ({err})"
+    actual = _file_digests(step_dir)
+    for name, digest in expected.items():
+        if name not in actual:
+            return f"{step_dir / name} is missing"
+        if actual[name] != digest:
+            size = (step_dir / name).stat().st_size
+            return f"{step_dir / name} is damaged ({size} bytes, content differs from its digest)"
+    return None
 
 
 def latest_step(directory: Path) -> int | None:
-    """The newest complete checkpoint step in ``directory``, or None."""
-    directory = Path(directory)
-    if not directory.is_dir():
-        return None
-    with _manager(directory) as manager:
-        return manager.latest_step()
+    """The newest intact checkpoint step in ``directory``; None when it has no steps.
+
+    Newer damaged or unfinished steps are skipped with a :class:`CheckpointWarning`;
+    raises CheckpointError when there are steps but none is intact.
+    """
+    problems = []
+    for step in reversed(steps(directory)):
+        problem = damage(directory, step)
+        if problem is None:
+            if problems:
+                warnings.warn(
+                    f"skipping {len(problems)} damaged checkpoint(s): {'; '.join(problems)}; "
+                    f"using step {step}",
+                    CheckpointWarning,
+                    stacklevel=2,
+                )
+            return step
+        problems.append(f"step {step}: {problem}")
+    if problems:
+        raise CheckpointError(f"no intact checkpoint in {directory}: {'; '.join(problems)}")
+    return None
+
+
+def resolve_step(directory: Path, step: int | None = None) -> int:
+    """``step`` after checking it is intact, or the newest intact step when None."""
+    if not Path(directory).is_dir():
+        raise CheckpointError(f"no checkpoint found in {directory} (no such folder)")
+    if step is None:
+        step = latest_step(directory)
+        if step is None:
+            raise CheckpointError(f"no checkpoint found in {directory}")
+        return step
+    if step not in steps(directory):
+        raise CheckpointError(
+            f"no checkpoint step {step} in {directory}; it holds {steps(directory) or 'none'}"
+        )
+    problem = damage(directory, step)
+    if problem is not None:
+        raise CheckpointError(f"checkpoint step {step} cannot be used: {problem}")
+    return step
 
 
 def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
-    """The JSON record of checkpoint ``step`` (default: the latest)."""
-    step = _resolve_step(directory, step)
-    with _manager(directory) as manager:
-        restored = manager.restore(step, args=ocp.args.Composite(metadata=ocp.args.JsonRestore()))
+    """The JSON record of checkpoint ``step`` (default: the newest intact one)."""
+    step = resolve_step(directory, step)
+    try:
+        with _manager(directory) as manager:
+            restored = manager.restore(
+                step, args=ocp.args.Composite(metadata=ocp.args.JsonRestore())
+            )
+    except Exception as err:  # Orbax/JSON errors name neither the run nor the file
+        raise CheckpointError(
+            f"cannot read {Path(directory) / str(step) / METADATA_FILE}: {err}"
+        ) from err
     return dict(restored["metadata"])
 
 
@@ -84,7 +205,7 @@ def restore(
     whole training state): its leaves are found by path.
     Returns the restored state (host numpy leaves) and the metadata.
     """
-    step = _resolve_step(directory, step)
+    step = resolve_step(directory, step)
     metadata = read_metadata(directory, step)
     with_path, treedef = jax.tree_util.tree_flatten_with_path(like)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]
@@ -126,15 +247,20 @@ def restore(
             )
     wanted = [(i, leaf) for i, leaf in zip(indices, leaves) if np.prod(leaf.shape)]
     abstract = {f"leaf_{i:05d}": jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for i, leaf in wanted}
-    with _manager(directory) as manager:
-        args = ocp.args.StandardRestore(abstract)
-        if partial:  # read only the arrays it names
-            args = ocp.args.PyTreeRestore(
-                item=abstract,
-                restore_args=jax.tree.map(lambda _: ocp.RestoreArgs(restore_type=np.ndarray), abstract),
-                partial_restore=True,
-            )
-        restored = manager.restore(step, args=ocp.args.Composite(state=args))
+    args = ocp.args.StandardRestore(abstract)
+    if partial:  # read only the arrays it names
+        args = ocp.args.PyTreeRestore(
+            item=abstract,
+            restore_args=jax.tree.map(lambda _: ocp.RestoreArgs(restore_type=np.ndarray), abstract),
+            partial_restore=True,
+        )
+    try:
+        with _manager(directory) as manager:
+            restored = manager.restore(step, args=ocp.args.Composite(state=args))
+    except Exception as err:  # e.g. a step written before digests, damaged since
+        raise CheckpointError(
+            f"cannot read the arrays of {Path(directory) / str(step)}: {err}"
+        ) from err
     arrays = [
         np.asarray(restored["state"][f"leaf_{i:05d}"])
         if np.prod(leaf.shape)
@@ -145,23 +271,17 @@ def restore(
 
 
 def discard_after(directory: Path, step: int) -> list[int]:
-    """Delete the checkpoints of ``directory`` newer than ``step`` (a population resumes
-    from the epoch all its members saved); returns the deleted steps."""
+    """Remove the checkpoints of ``directory`` newer than ``step`` (a population resumes
+    from the epoch all its members saved; a run from its newest intact step). Intact
+    ones are deleted (they will be written again); damaged ones are moved to
+    ``<directory>.damaged/`` for inspection. Returns the removed steps."""
     directory = Path(directory)
-    if not directory.is_dir():
-        return []
-    with _manager(directory) as manager:
-        newer = [s for s in manager.all_steps() if s > step]
-        for s in newer:
-            manager.delete(s)
+    newer = [s for s in steps(directory) if s > step]
+    for s in newer:
+        if damage(directory, s) is None:
+            shutil.rmtree(directory / str(s))
+        else:
+            aside = directory.with_name(directory.name + ".damaged")
+            aside.mkdir(exist_ok=True)
+            shutil.move(directory / str(s), aside / f"{s}-{os.getpid()}")
     return newer
-
-
-def _resolve_step(directory: Path, step: int | None) -> int:
-    if not Path(directory).is_dir():
-        raise CheckpointError(f"no checkpoint found in {directory} (no such folder)")
-    if step is None:
-        step = latest_step(directory)
-        if step is None:
-            raise CheckpointError(f"no checkpoint found in {directory}")
-    return step

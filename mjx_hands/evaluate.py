@@ -78,6 +78,7 @@ def restore_run(
             f"{run_dir} has no best policy ({ckpt_dir} missing): it was trained before "
             "train.py kept one, or it never evaluated; evaluate the latest checkpoint instead"
         )
+    step = checkpoint.resolve_step(ckpt_dir, step)  # the newest intact one when None
     meta = checkpoint.read_metadata(ckpt_dir, step)
     config = training.config_from_json(meta["config"])
     config = dataclasses.replace(config, resume=False)
@@ -98,8 +99,8 @@ def restore_run(
         like_tree = training.policy_tree(like)
     else:
         like_tree = training.checkpoint_tree(like, config.save_replay)
-    tree, _ = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial)
-    return algo, tree, config, single
+    tree, meta = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial)
+    return algo, tree | {"epoch": int(meta["epoch"])}, config, single
 
 
 def load_policy(
@@ -107,9 +108,7 @@ def load_policy(
 ):
     """(algo, unreplicated learner, config, single env, epoch) of a run's checkpoint."""
     algo, tree, config, single = restore_run(run_dir, step, eval_envs, best, learner_only=True)
-    ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
-    epoch = int(checkpoint.read_metadata(ckpt_dir, step)["epoch"])
-    return algo, tree["learner"], config, single, epoch
+    return algo, tree["learner"], config, single, tree["epoch"]
 
 
 def rollout(single, policy, num_episodes: int, rng: jax.Array) -> dict[str, np.ndarray]:
