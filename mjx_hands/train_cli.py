@@ -31,14 +31,13 @@ def option(argv: list[str], name: str) -> str | None:
 def default_config(argv: list[str]):
     """The config the command line overrides: a resumed run's own, else the preset's."""
     import dataclasses
-    import json
     from pathlib import Path
 
     from mjx_hands import training
 
     run_dir = option(argv, "--run-dir") or option(argv, "--run_dir")
     if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
-        saved = json.loads((Path(run_dir) / "config.json").read_text())
+        saved = training.read_config_json(Path(run_dir) / "config.json")
         try:
             config = training.config_from_json(saved)
         except TypeError as err:  # a key this version does not know
@@ -81,9 +80,11 @@ def main(argv: list[str] | None = None) -> int:
         f"eval success at the end {final.get('eval/success_final', float('nan')):.2f} "
         f"(some step {final.get('eval/success', float('nan')):.2f}), "
         f"best {summary.get('best_eval_success_final', float('nan')):.2f}"
-        + (f" (epoch {summary['best_checkpoint']}, policy in best/)"
-           if summary.get("best_checkpoint") is not None else "")
+        + (
+            f" (epoch {summary['best_checkpoint']}, policy in best/)"
+            if summary.get("best_checkpoint") is not None
+            else ""
+        )
         + f"; results in {summary['run_dir']}"
     )
     return 0
-

@@ -67,6 +67,10 @@ class TrainConfig:
     """Stop (with a checkpoint) once training has run this long."""
     eval_every: int = 5
     """Evaluate (and checkpoint) every this many epochs."""
+    checkpoint_every: int = 1
+    """Also checkpoint every this many epochs (a crash loses at most these epochs)."""
+    checkpoint_minutes: float | None = None
+    """Also checkpoint once this many minutes have passed since the last checkpoint."""
     eval_envs: int = 64
     """Episodes per evaluation (summed over devices), deterministic policy."""
     seed: int = 0
@@ -82,15 +86,24 @@ class TrainConfig:
 
     def __post_init__(self):
         problems = []
-        for name in ("num_envs", "epochs", "eval_every", "eval_envs"):
+        for name in ("num_envs", "epochs", "eval_every", "eval_envs", "checkpoint_every"):
             if getattr(self, name) <= 0:
                 problems.append(
                     f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}"
                 )
-        if self.max_minutes is not None and self.max_minutes <= 0:
-            problems.append(f"--max-minutes must be positive, got {self.max_minutes}")
-        if self.target_rotation_noise < 0:
-            problems.append("--target-rotation-noise must be >= 0")
+        for name in ("max_minutes", "checkpoint_minutes"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                problems.append(
+                    f"--{name.replace('_', '-')} must be a positive number, got {value}"
+                )
+        if not (math.isfinite(self.target_rotation_noise) and self.target_rotation_noise >= 0):
+            problems.append(
+                f"--target-rotation-noise must be a finite number >= 0, got "
+                f"{self.target_rotation_noise}"
+            )
+        if self.mocap is not None and not Path(self.mocap).is_dir():
+            problems.append(f"--mocap {self.mocap}: no such folder")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -248,7 +261,13 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
         if all("eval/success_final" in r for r in evals):
             finals = [r["eval/success_final"] for r in evals]
             ax.plot(steps, finals, "o-", lw=2, label="contact at the end (headline)")
-        ax.plot(steps, [r["eval/success"] for r in evals], "s--", alpha=0.7, label="contact at some step")
+        ax.plot(
+            steps,
+            [r["eval/success"] for r in evals],
+            "s--",
+            alpha=0.7,
+            label="contact at some step",
+        )
         ax.legend(loc="best")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation success rate")
@@ -323,6 +342,17 @@ def _from_checkpoint_trees(trees: list[dict[str, Any]], fresh: TrainerState, alg
         )
     # Laid out as the epoch's outputs: any other sharding retraces (and recompiles) the epoch.
     return algo.to_devices(stack_members(members))
+
+
+def read_config_json(path: Path) -> dict[str, Any]:
+    """A run's config.json as a dict; a damaged file is an error naming it."""
+    try:
+        data = json.loads(Path(path).read_text())
+        if not isinstance(data, dict):
+            raise TypeError(f"it holds a JSON {type(data).__name__}, not an object")
+    except (OSError, ValueError, TypeError) as err:
+        raise ValueError(f"{path} is unreadable ({err}); restore it or start a new run") from err
+    return data
 
 
 def config_to_json(config: TrainConfig) -> dict[str, Any]:
@@ -457,20 +487,37 @@ class RunDirectory:
                 raise FileNotFoundError(
                     f"--resume: no run to continue in {self.path} (config.json missing)"
                 )
-            _check_resumable(json.loads(self.config_path.read_text()), self.config, self.path)
-        elif self.config_path.exists() and checkpoint.latest_step(self.checkpoints) is not None:
+            _check_resumable(read_config_json(self.config_path), self.config, self.path)
+        elif self.config_path.exists() and checkpoint.steps(self.checkpoints):
             raise FileExistsError(
                 f"{self.path} already holds a run; pass --resume to continue it or choose "
                 "another --run-dir"
             )
 
     def latest_epoch(self) -> int | None:
+        """The newest intact checkpoint's epoch when resuming (damaged ones: a warning)."""
         return checkpoint.latest_step(self.checkpoints) if self.config.resume else None
 
-    def restore(self, like: TrainerState, index: int, epoch: int) -> dict[str, Any]:
+    def last_checkpoint(self) -> str:
+        """Where training would continue from, for messages."""
+        if self.last_saved == 0:
+            return "no checkpoint was saved yet"
+        return f"the last checkpoint (epoch {self.last_saved}) is in {self.checkpoints}"
+
+    def restore(
+        self, like: TrainerState, index: int, epoch: int, num_devices: int
+    ) -> dict[str, Any]:
         """Member ``index``'s checkpoint tree of ``epoch`` (shaped like ``like``'s)."""
+        meta = checkpoint.read_metadata(self.checkpoints, epoch)
+        saved_devices = int(meta.get("num_devices", 1))
+        if saved_devices != num_devices:
+            raise checkpoint.CheckpointError(
+                f"--resume: {self.path} was trained on {saved_devices} device(s), this process "
+                f"has {num_devices}; resume with {saved_devices} (CPU: XLA_FLAGS="
+                f"--xla_force_host_platform_device_count={saved_devices})"
+            )
         # The checkpoint's own setting says whether it holds the replay buffer.
-        saved_replay = checkpoint.read_metadata(self.checkpoints, epoch)["config"]["save_replay"]
+        saved_replay = meta["config"]["save_replay"]
         tree, _ = checkpoint.restore(
             self.checkpoints, checkpoint_tree(like, saved_replay, index), epoch
         )
@@ -570,9 +617,13 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
 
     variant_for = getattr(single, "variant_for", None)
     if variant_for is None:
-        raise ValueError(f"{type(single).__name__} has no reward variants; members differ in reward")
+        raise ValueError(
+            f"{type(single).__name__} has no reward variants; members differ in reward"
+        )
     weights = [
-        variant_for(env_lib.reward_weights(env_lib.EnvConfig(reward=c.reward, imitation=c.imitation)))
+        variant_for(
+            env_lib.reward_weights(env_lib.EnvConfig(reward=c.reward, imitation=c.imitation))
+        )
         for c in configs
     ]
     return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
@@ -586,13 +637,14 @@ def _newly_diverged(
     and the diverged one keeps its last good checkpoint and logs no more."""
     new = []
     for index, (metrics_m, run_m) in enumerate(zip(metrics, runs)):
-        bad = sorted(k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v))
+        bad = sorted(
+            k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v)
+        )
         if index in diverged or not (bad or metrics_m["train/params_finite"] < 1.0):
             continue
         message = (
             f"epoch {epoch}: training diverged (non-finite {bad or 'parameters'}) in "
-            f"{run_m.path}; the last good checkpoint (epoch {run_m.last_saved}) is in "
-            f"{run_m.checkpoints}"
+            f"{run_m.path}; {run_m.last_checkpoint().replace('the last', 'the last good')}"
         )
         if len(runs) == 1:
             raise TrainingDiverged(
@@ -603,7 +655,9 @@ def _newly_diverged(
     return new
 
 
-def _progress_line(epoch: int, epochs: int, rate: float, rows: list[dict], labels: list[str]) -> str:
+def _progress_line(
+    epoch: int, epochs: int, rate: float, rows: list[dict], labels: list[str]
+) -> str:
     """One line per epoch: the run's figures, or each variant's mean over its members."""
     line = f"epoch {epoch:4d}/{epochs}  {rate:8,.0f} steps/s  "
     if len(rows) == 1:
@@ -684,7 +738,7 @@ def run_population(
         for r in runs:  # ... whose newer checkpoints the resumed run will write again
             checkpoint.discard_after(r.checkpoints, start_epoch)
             checkpoint.discard_after(r.best_dir, start_epoch)
-        trees = [r.restore(state, i, start_epoch) for i, r in enumerate(runs)]
+        trees = [r.restore(state, i, start_epoch, algo.num_devices) for i, r in enumerate(runs)]
         state = _from_checkpoint_trees(trees, state, algo)
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
     for r in runs:
@@ -694,6 +748,7 @@ def run_population(
     steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
     started = time.perf_counter()
     stop_reason = "epochs"
+    last_save_time = started
     diverged: set[int] = set()
     interrupts = Interrupts()
     interrupts.install()
@@ -719,7 +774,9 @@ def run_population(
                 "time/wall_seconds": time.perf_counter() - launched,
             }
             if len(runs) > 1:  # what the machine did: every member's steps
-                common["time/population_env_steps_per_second"] = len(runs) * steps_per_epoch / seconds
+                common["time/population_env_steps_per_second"] = (
+                    len(runs) * steps_per_epoch / seconds
+                )
             peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
             if peak is not None:  # accelerators count; CPU does not
                 common["memory/device_peak_gib"] = peak / 2**30
@@ -748,28 +805,40 @@ def run_population(
             rate = len(runs) * common["time/env_steps_per_second"]
             line = _progress_line(epoch, config.epochs, rate, rows, labels)
             print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
-            if evaluate or out_of_time:
+            since_save = time.perf_counter() - last_save_time
+            if (
+                evaluate
+                or out_of_time
+                or epoch % config.checkpoint_every == 0
+                or (
+                    config.checkpoint_minutes is not None
+                    and since_save > 60 * config.checkpoint_minutes
+                )
+            ):
                 with interrupts.deferred():
                     for i, (r, row) in enumerate(zip(runs, rows)):
                         if i in diverged:
                             continue
                         r.save(state, i, epoch, algo.num_devices)
-                        r.save_if_best(state, i, epoch, row, algo.num_devices)
+                        if "eval/success" in row:
+                            r.save_if_best(state, i, epoch, row, algo.num_devices)
+                last_save_time = time.perf_counter()
             if out_of_time:
                 stop_reason = "max_minutes"
                 break
     except KeyboardInterrupt:
         stop_reason = "interrupted"
-        where = runs[0].checkpoints if len(runs) == 1 else "each run's checkpoints/"
-        print(
-            f"\ninterrupted; the last checkpoint (epoch {runs[0].last_saved}) is in {where}",
-            file=out,
-        )
+        if len(runs) == 1:
+            where = runs[0].last_checkpoint()
+        else:
+            where = (
+                f"the last checkpoint (epoch {runs[0].last_saved}) is in each run's checkpoints/"
+            )
+        print(f"\ninterrupted; {where}", file=out)
     finally:
         interrupts.uninstall()
         for r in runs:
             r.close()
     return [
-        r.summary(stop_reason, start_epoch) | {"epoch_compilations": algo.trace_count}
-        for r in runs
+        r.summary(stop_reason, start_epoch) | {"epoch_compilations": algo.trace_count} for r in runs
     ]

@@ -16,6 +16,7 @@ import os
 import signal
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import jax
@@ -69,8 +70,13 @@ def _learner(run_dir: Path) -> dict:
 
 
 TD3 = dataclasses.replace(  # every learner option at once
-    SMALL, twin_critics=True, target_policy_noise=0.2, actor_update_interval=2, n_step=3,
-    num_atoms=11, value_range=(-40.0, 5.0),
+    SMALL,
+    twin_critics=True,
+    target_policy_noise=0.2,
+    actor_update_interval=2,
+    n_step=3,
+    num_atoms=11,
+    value_range=(-40.0, 5.0),
 )
 
 
@@ -83,7 +89,8 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, ddpg):
     assert full["epochs"] == 4 and full["last_checkpoint"] == 4
 
     half = training.run(
-        _config(tmp_path / "split", epochs=2, ddpg=ddpg), out=io.StringIO(),
+        _config(tmp_path / "split", epochs=2, ddpg=ddpg),
+        out=io.StringIO(),
         env_factory=point_factory,
     )
     assert half["last_checkpoint"] == 2
@@ -145,7 +152,9 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     assert sorted(p.name for p in (run_dir / "best").iterdir() if p.name.isdigit()) == [str(epoch)]
     meta = checkpoint.read_metadata(run_dir / "best")
     assert meta["contents"] == "policy" and meta["eval"]["eval/success"] == best_row["eval/success"]
-    algo, _ = training.make_learner(training.config_from_json(meta["config"]), env_factory=point_factory)
+    algo, _ = training.make_learner(
+        training.config_from_json(meta["config"]), env_factory=point_factory
+    )
     like = training.policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
     tree, _ = checkpoint.restore(run_dir / "best", like)
     assert set(tree) == {"learner"}  # no env state, no replay buffer
@@ -560,3 +569,165 @@ def test_brax_trainers_refuse_a_run_directory_that_holds_a_run(tmp_path):
     with pytest.raises(ValueError, match="runs through mjx_hands.brax_agents.run"):
         training.run(_config(tmp_path / "other", algo="ppo"), out=io.StringIO())
     assert (run_dir / "metrics.csv").read_text() == "epoch\n1\n"
+
+
+# ------------------------------------------------------------ faults: kill, damage, refuse
+def _worker(run_dir: Path, epochs: int, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [
+            sys.executable,
+            str(ROOT / "tests" / "point_reach_worker.py"),
+            str(run_dir),
+            str(epochs),
+            *extra,
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def _kill_at(proc: subprocess.Popen, marker: str) -> str:
+    """SIGKILL ``proc`` (no handler runs, like a power cut) once it prints ``marker``."""
+    seen = []
+    for line in proc.stdout:
+        seen.append(line)
+        if marker in line:
+            proc.kill()
+            break
+    proc.wait(timeout=60)
+    assert marker in "".join(seen), "".join(seen)
+    return "".join(seen)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The learner after 4 epochs of a run nothing happened to."""
+    run_dir = tmp_path_factory.mktemp("uninterrupted") / "run"
+    training.run(
+        _config(run_dir, epochs=4, eval_every=2), out=io.StringIO(), env_factory=point_factory
+    )
+    return _learner(run_dir)
+
+
+def _truncate_newest_state(run_dir: Path) -> None:
+    step_dir = run_dir / "checkpoints" / str(checkpoint.steps(run_dir / "checkpoints")[-1])
+    file = max(
+        (f for f in (step_dir / "state").rglob("*") if f.is_file()), key=lambda f: f.stat().st_size
+    )
+    file.write_bytes(file.read_bytes()[: file.stat().st_size // 2])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "fault", ["killed mid-epoch", "killed mid-save", "newest checkpoint damaged"]
+)
+def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, uninterrupted, fault):
+    run_dir = tmp_path / "run"
+    if fault == "killed mid-epoch":  # epoch 3's line prints before its checkpoint is saved
+        _kill_at(_worker(run_dir, 4), "epoch    3/")
+        possible_starts = {2, 3}
+    elif fault == "killed mid-save":  # Orbax has written step 3, its digest not yet
+        _kill_at(_worker(run_dir, 4, "--hold-before-digest", "3"), "holding 3")
+        possible_starts = {2}
+    else:
+        training.run(
+            _config(run_dir, epochs=3, eval_every=2), out=io.StringIO(), env_factory=point_factory
+        )
+        _truncate_newest_state(run_dir)
+        possible_starts = {2}
+    left_behind = checkpoint.steps(run_dir / "checkpoints")
+    log = io.StringIO()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        resumed = training.run(
+            _config(run_dir, epochs=4, eval_every=2, resume=True),
+            out=log,
+            env_factory=point_factory,
+        )
+    start = int(log.getvalue().split("resumed from epoch ")[1].split()[0])
+    assert start in possible_starts and resumed["epochs"] == 4
+    if start == 2 and 3 in left_behind:  # step 3 is not intact: skipped with a warning
+        assert any("step 3:" in str(w.message) for w in caught), [str(w.message) for w in caught]
+    after = _learner(run_dir)
+    for x, y in zip(jax.tree.leaves(uninterrupted["learner"]), jax.tree.leaves(after["learner"])):
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(uninterrupted["buffer"].data.obs, after["buffer"].data.obs)
+    rows = (run_dir / "metrics.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["1.0", "2.0", "3.0", "4.0"]
+
+
+@pytest.mark.slow
+def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
+    every_2 = tmp_path / "every2"
+    training.run(
+        _config(every_2, epochs=3, eval_every=5, checkpoint_every=2),
+        out=io.StringIO(),
+        env_factory=point_factory,
+    )
+    assert checkpoint.steps(every_2 / "checkpoints") == [2, 3]  # 3: the last epoch
+    by_clock = tmp_path / "clock"
+    training.run(
+        _config(by_clock, epochs=3, eval_every=5, checkpoint_every=100, checkpoint_minutes=1e-6),
+        out=io.StringIO(),
+        env_factory=point_factory,
+    )
+    assert checkpoint.steps(by_clock / "checkpoints") == [1, 2, 3]
+    assert checkpoint.steps(by_clock / "best") == [3]  # the policy only at evaluations
+    # Resuming on another device count names the counts, not array shapes.
+    config = _config(by_clock, epochs=3, resume=True)
+    algo, _ = training.make_learner(config, env_factory=point_factory)
+    with pytest.raises(
+        checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this process has 2"
+    ):
+        training.RunDirectory(config).restore(algo.init(jax.random.PRNGKey(0)), 0, 3, num_devices=2)
+
+
+@pytest.mark.slow
+def test_divergence_before_the_first_checkpoint_says_there_is_none(tmp_path):
+    def exploding(config, num_devices):
+        return point_factory(config, num_devices, env_class=ExplodingReach)
+
+    with pytest.raises(training.TrainingDiverged, match="no checkpoint was saved yet") as err:
+        training.run(_config(tmp_path / "run", epochs=2), out=io.StringIO(), env_factory=exploding)
+    assert "checkpoints" not in str(err.value)
+
+
+def _refused(argv: list[str], capsys) -> str:
+    from mjx_hands import train_cli
+
+    try:
+        code = train_cli.main(argv)
+    except SystemExit as exit_:  # tyro's own refusal of an option value
+        code = exit_.code
+    assert code == 2
+    return capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--ddpg.hidden-sizes", "0"], "hidden_sizes=(0,)"),
+        (["--target-rotation-noise", "nan"], "--target-rotation-noise must be a finite number"),
+        (["--ddpg.actor-learning-rate", "inf"], "actor_learning_rate=inf"),
+        (["--max-minutes", "nan"], "--max-minutes must be a positive number"),
+        (["--checkpoint-every", "0"], "--checkpoint-every must be positive"),
+        (["--mocap", "/nonexistent/mocap"], "--mocap /nonexistent/mocap: no such folder"),
+    ],
+)
+def test_bad_numbers_and_folders_are_refused_before_anything_is_written(
+    args, message, tmp_path, capsys
+):
+    run_dir = tmp_path / "r"
+    err = _refused([*args, "--run-dir", str(run_dir)], capsys)
+    assert message in err
+    assert not run_dir.exists()
+
+
+def test_a_damaged_config_json_is_named_on_resume(tmp_path, capsys):
+    run_dir = tmp_path / "r"
+    run_dir.mkdir()
+    (run_dir / "config.json").write_text('{"task": "handsh')
+    err = _refused(["--run-dir", str(run_dir), "--resume"], capsys)
+    assert f"{run_dir / 'config.json'} is unreadable" in err

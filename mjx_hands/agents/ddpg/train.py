@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from typing import Any
 
 import jax
@@ -129,7 +130,14 @@ class DDPGConfig:
             and self.updates_per_iteration % self.actor_update_interval == 0,
             # Batch statistics of an ensemble's members are not carried: refuse the pair.
             "twin_critics": not (self.twin_critics and self.batch_norm),
+            "hidden_sizes": len(self.hidden_sizes) > 0 and all(h > 0 for h in self.hidden_sizes),
         }
+        # NaN passes every comparison's negation above: refuse non-finite numbers first.
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            numbers = value if isinstance(value, tuple) else (value,)
+            if any(isinstance(x, float) and not math.isfinite(x) for x in numbers):
+                checks[field.name] = False
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
             values = ", ".join(f"{n}={getattr(self, n)!r}" for n in bad)
@@ -619,9 +627,7 @@ class DDPG:
             metrics = metrics | actor_metrics
             if cfg.batch_norm:
                 # Running averages of the minibatch statistics, the same on every device.
-                stats = jax.lax.pmean(
-                    (critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS
-                )
+                stats = jax.lax.pmean((critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS)
                 critic_params = critic_params | {"batch_stats": stats[0]}
                 actor_params = actor_params | {"batch_stats": stats[1]}
             learner = learner.replace(actor_params=actor_params, actor_opt_state=actor_opt_state)
@@ -666,9 +672,7 @@ class DDPG:
         if rng.ndim == 1:
             rng = rng[None]
         if rng.shape[0] != self.members:
-            raise ValueError(
-                f"evaluate needs one key per member ({self.members}), got {rng.shape}"
-            )
+            raise ValueError(f"evaluate needs one key per member ({self.members}), got {rng.shape}")
         rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
         keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
         metrics = self._evaluate(learner, jnp.swapaxes(keys, 0, 1))
