@@ -37,7 +37,12 @@ release differs in two places; see ``mocap_data/README.md``):
 * ``<task>_joint_angles_*.npy`` have fewer rows than the capture arrays; they are
   aligned to the *end* of the take (row ``i`` is frame ``i + T - T_joints``), which the
   finger-body quaternions confirm (their rotation rates correlate with the joint
-  rates at exactly that lag).
+  rates at exactly that lag). ``T - T_joints`` is fixed per task
+  (:data:`RELEASE_JOINT_OFFSET`) and checked.
+
+Every array read is checked for damage, dtype and shape, and every frame used for
+plausibility (:data:`POSITION_BOUND`, :data:`JOINT_ANGLE_BOUND`,
+:data:`QUAT_NORM_TOLERANCE`); anything wrong raises :class:`MocapError` naming the file.
 """
 
 from __future__ import annotations
@@ -82,12 +87,113 @@ code applies it to vectors already expressed in the mocap *palm* frame, so it is
 mocap-palm -> Shadow-palm alignment (it keeps Y as Y and cannot make a Y-up world Z-up).
 The fitted :class:`PalmCalibration` lies ~20 deg from it."""
 
+RELEASE_JOINT_OFFSET = {"handshake": 1, "handclap": 1, "et": 3}
+"""Capture frames before the first joint-angle row of the authors' release, per task: the
+joint arrays are aligned to the end of the take and hold ``T - offset`` rows (handshake
+9117 of 9118 frames, hand clap 7018 of 7019, E.T. 6263 of 6266). :func:`read_release`
+requires exactly this, since a joint array cut short at its end would otherwise shift
+every row by the missing frames. Pass ``joint_offset=`` to read another release."""
+
 SCHEMA_VERSION = 1
 """Version of the ``mocap_data/<task>.npz`` layout (see mocap_data/README.md)."""
 
 
+POSITION_BOUND = 3.0
+"""Metres: the longest plausible palm-to-palm or palm-to-fingertip vector (two people's
+hands cannot be farther apart). Checked on every frame a demonstration or the palm
+calibration uses, and on every frame of an npz file. Measured: release 1.38 m at most
+over all frames (0.93 m inside windows and calibration lead-ins), synthetic files 0.66 m."""
+JOINT_ANGLE_BOUND = float(np.pi)
+"""Radians: the largest plausible |joint angle| (before clipping into the model's ranges,
+which would hide a damaged value). Measured: release 3.03 rad at most over all frames
+(handshake target LFJ1; 2.71 rad inside windows and lead-ins), synthetic files 1.46 rad."""
+QUAT_NORM_TOLERANCE = 0.1
+"""Largest |norm - 1| of a palm quaternion that is used (release: 1e-6, synthetic float32
+files: 6e-8). Outside the frames used, a norm below ``QUAT_DROPOUT_NORM`` (or NaN) is a
+capture dropout and becomes a NaN rotation, as before."""
+QUAT_DROPOUT_NORM = 0.5
+"""Release quaternions with a smaller norm (zeros) or a NaN are capture dropouts."""
+
+
 class MocapError(ValueError):
     """Demonstration data that is missing, malformed or inconsistent."""
+
+
+# --------------------------------------------------------------------------- checks
+_DTYPES = {  # kind: (numpy dtype kinds accepted, what the message says is expected)
+    "float": ("f", "a real floating-point dtype (float16/32/64)"),
+    "int": ("iu", "an integer dtype"),
+    "str": ("U", "a unicode str dtype"),
+}
+_BOUNDS = {  # quantity: (lower, upper, unit)
+    "length": (0.0, POSITION_BOUND, "m"),
+    "angle": (-JOINT_ANGLE_BOUND, JOINT_ANGLE_BOUND, "rad"),
+    "norm": (1.0 - QUAT_NORM_TOLERANCE, 1.0 + QUAT_NORM_TOLERANCE, ""),
+}
+
+
+def _check_dtype(where: str, name: str, array: np.ndarray, kind: str) -> None:
+    """MocapError unless ``array`` has a dtype of ``kind`` ("float", "int" or "str").
+
+    Why: NumPy turns bool, integer, datetime, string and complex arrays into floats
+    without complaint (complex silently loses its imaginary part), so a damaged file
+    would become wrong angles instead of an error.
+    """
+    kinds, expected = _DTYPES[kind]
+    if array.dtype.kind not in kinds:
+        raise MocapError(
+            f"{where}: {name} has the wrong dtype (got {array.dtype}, expected {expected})"
+        )
+
+
+def _vector_norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms over the last axis; hypot does not overflow for huge (damaged) values."""
+    return np.hypot.reduce(np.asarray(v, np.float64), axis=-1)
+
+
+def _first_outside(values: np.ndarray, lower: float, upper: float) -> tuple[int, int] | None:
+    """(row, column) of the first entry of ``values`` (R, K) outside [lower, upper], NaN too."""
+    with np.errstate(invalid="ignore"):
+        bad = ~((values >= lower) & (values <= upper))
+    if not bad.any():
+        return None
+    row, col = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    return int(row), int(col)
+
+
+def _check_bounds(
+    where: str,
+    name: str,
+    quantity: str,
+    values: np.ndarray,
+    rows: np.ndarray | None = None,
+    columns: tuple[str, ...] | None = None,
+    context: str = "",
+    at: str = "frame",
+) -> None:
+    """MocapError at the first of ``values`` (R, ...) outside the bounds of ``quantity``.
+
+    rows: the frame/row number of each of the R rows (default 0..R-1); columns: names of
+    the entries of a row (e.g. joint names) for the message.
+    """
+    lower, upper, unit = _BOUNDS[quantity]
+    values = np.asarray(values, np.float64).reshape(len(values), -1)
+    hit = _first_outside(values, lower, upper)
+    if hit is None:
+        return
+    r, c = hit
+    row = r if rows is None else int(rows[r])
+    item = f" ({columns[c]})" if columns else ""
+    unit = f" {unit}" if unit else ""
+    raise MocapError(
+        f"{where}: {name} {quantity} out of bounds at {at} {row}{item}{context} "
+        f"(got {values[r, c]:.6g}{unit}, expected {lower:.6g}..{upper:.6g}{unit})"
+    )
+
+
+def _check_shape(where: str, name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:
+    if array.shape != shape:
+        raise MocapError(f"{where}: {name} must have shape {shape}, got {array.shape}")
 
 
 # --------------------------------------------------------------------------- types
@@ -195,6 +301,10 @@ class Release:
     target_joints, actor_joints: (T, 20) raw angles in the authors' convention, aligned to
       frames; rows before ``joint_offset`` are NaN (not recorded).
     joint_offset: first frame with joint angles.
+    target_quat_norm, actor_quat_norm: (T,) norms of the palm quaternions as stored (a
+      frame's rotation is NaN where the norm is below ``QUAT_DROPOUT_NORM`` or NaN).
+    target_points: (T, 6, 3) or None: target palm and fingertips - actor palm, sim world,
+      as released (``target_tips`` is derived from it).
     """
 
     task: str
@@ -207,6 +317,9 @@ class Release:
     target_joints: np.ndarray
     actor_joints: np.ndarray
     joint_offset: int
+    target_quat_norm: np.ndarray
+    actor_quat_norm: np.ndarray
+    target_points: np.ndarray | None
 
     @property
     def num_frames(self) -> int:
@@ -344,8 +457,34 @@ def _check_task(task: str) -> None:
 
 
 # ------------------------------------------------------------ the authors' release
-def _load_npy(root: Path, file: str, dims: tuple[int | None, ...] | list, required: bool = True):
-    """Load ``root/file`` and check its shape against ``dims`` (None: any length).
+def _read_npy(path: Path) -> np.ndarray:
+    """The array in the .npy file ``path``; MocapError naming it for any damage."""
+    try:
+        with open(path, "rb") as fh:
+            array = np.load(fh, allow_pickle=False)
+            end = fh.tell()
+            trailing = isinstance(array, np.ndarray) and fh.read(1) != b""
+    except Exception as e:  # damaged bytes: NumPy raises many types (ValueError, EOFError...)
+        raise MocapError(f"cannot read mocap file {path}: {type(e).__name__}: {e}") from e
+    if not isinstance(array, np.ndarray):
+        raise MocapError(f"{path}: not an .npy array (got {type(array).__name__})")
+    if trailing:  # e.g. a header that claims fewer rows than were written
+        raise MocapError(
+            f"{path}: data continues after the {array.shape} array its header describes "
+            f"(got {path.stat().st_size} bytes, expected {end})"
+        )
+    return array
+
+
+def _load_npy(
+    root: Path,
+    file: str,
+    dims: tuple[int | None, ...] | list,
+    required: bool = True,
+    kind: str = "float",
+):
+    """Load ``root/file`` and check its shape against ``dims`` (None: any length) and its
+    dtype against ``kind`` ("float" or "int").
 
     ``dims`` may be a list of alternative shapes. Returns None for a missing optional file.
     """
@@ -354,31 +493,67 @@ def _load_npy(root: Path, file: str, dims: tuple[int | None, ...] | list, requir
         if not required:
             return None
         raise MocapError(f"missing mocap file {path}")
-    try:
-        array = np.load(path, allow_pickle=False)
-    except Exception as e:  # corrupt / not an .npy
-        raise MocapError(f"cannot read mocap file {path}: {e}") from e
+    array = _read_npy(path)
     options = dims if isinstance(dims, list) else [dims]
-    for shape in options:
-        if array.ndim == len(shape) and all(
-            s is None or s == a for s, a in zip(shape, array.shape)
-        ):
-            return array
-    expected = " or ".join(
-        "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")" for shape in options
+    if not any(
+        array.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, array.shape))
+        for shape in options
+    ):
+        expected = " or ".join(
+            "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")" for shape in options
+        )
+        raise MocapError(f"{path}: expected shape {expected}, got {array.shape}")
+    _check_dtype(str(path), "array", array, kind)
+    return array
+
+
+def _joint_offset(task: str, joint_offset: int | None) -> int:
+    """The frames before the first joint row: given, or the authors' release's for ``task``."""
+    if joint_offset is None:
+        return RELEASE_JOINT_OFFSET[task]
+    if isinstance(joint_offset, bool) or not isinstance(joint_offset, (int, np.integer)):
+        raise MocapError(f"joint_offset must be an int, got {joint_offset!r}")
+    if joint_offset < 0:
+        raise MocapError(f"joint_offset must be >= 0, got {joint_offset}")
+    return int(joint_offset)
+
+
+def _palm_rotations(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Palm quaternions x, y, z, w (T, 4), capture frame -> rotations (T, 3, 3), sim world,
+    NaN at dropouts, and the stored norms (T,) (checked where frames are used)."""
+    norm = _vector_norm(q)
+    dropout = ~((norm > QUAT_DROPOUT_NORM) & np.isfinite(norm))  # also catches NaN
+    unit = np.where(
+        dropout[:, None], [0.0, 0.0, 0.0, 1.0], q / np.where(dropout, 1.0, norm)[:, None]
     )
-    raise MocapError(f"{file}: expected shape {expected}, got {array.shape}")
+    r = CAPTURE_TO_SIM @ quat_xyzw_to_matrix(unit)
+    r[dropout] = np.nan
+    return r, norm
 
 
-def read_release(task: str, root: str | Path | None = None) -> Release:
+def read_release(
+    task: str, root: str | Path | None = None, joint_offset: int | None = None
+) -> Release:
     """Read and check one task's arrays of the authors' release.
 
-    Raises MocapError for an unknown task, a missing file, a wrong shape, inconsistent
-    lengths, or window indices outside the take.
+    Args:
+      task: one of TASKS.
+      root: folder of the release (default ``REAL_DATA_PATH``).
+      joint_offset: capture frames before the first joint-angle row; the joint arrays
+        must hold exactly ``T - joint_offset`` rows. Default: the authors' release's
+        (``RELEASE_JOINT_OFFSET[task]``).
+
+    Raises MocapError for an unknown task, a missing or damaged file, a wrong shape or
+    dtype, inconsistent lengths, no windows, or window indices outside the take. Values
+    are checked where they are used (:func:`load_optitrack`, :func:`calibration_samples`).
     """
     _check_task(task)
     root = Path(root) if root is not None else REAL_DATA_PATH
-    windows = _load_npy(root, f"{task}_interaction_t.npy", (None, 3))
+    offset = _joint_offset(task, joint_offset)
+    windows_file = root / f"{task}_interaction_t.npy"
+    windows = _load_npy(root, windows_file.name, (None, 3), kind="int")
+    if len(windows) == 0:
+        raise MocapError(f"{windows_file}: no demonstrations (got 0 rows, expected at least 1)")
     palms = _load_npy(root, f"{task}_distance_array_palms.npy", (None, 1, 1, 3))[:, 0, 0]
     tips = _load_npy(root, f"{task}_distance_array_palms_1.npy", (None, 1, 6, 3), required=False)
     rot_t = _load_npy(root, f"{task}_rot_human.npy", (None, 24))
@@ -394,24 +569,24 @@ def read_release(task: str, root: str | Path | None = None) -> Release:
     ]:
         if array is not None and len(array) != n:
             raise MocapError(
-                f"{file}: expected {n} frames (as in {task}_distance_array_palms.npy), "
+                f"{root / file}: expected {n} frames (as in {task}_distance_array_palms.npy), "
                 f"got {len(array)}"
             )
-    if len(joints_t) != len(joints_a) or len(joints_t) > n:
-        raise MocapError(
-            f"{task}_joint_angles_human.npy / _robot.npy: expected equal lengths <= {n} frames, "
-            f"got {len(joints_t)} and {len(joints_a)}"
-        )
-    offset = n - len(joints_t)  # joint rows are aligned to the end of the take
-    windows = np.asarray(windows)
-    if not np.issubdtype(windows.dtype, np.integer):
-        raise MocapError(
-            f"{task}_interaction_t.npy: expected integer frame indices, got {windows.dtype}"
-        )
+    # Joint rows are aligned to the end of the take: a known offset, not n - len(joints),
+    # so that rows missing at the end cannot shift every other row silently.
+    for file, joints in [
+        (f"{task}_joint_angles_human.npy", joints_t),
+        (f"{task}_joint_angles_robot.npy", joints_a),
+    ]:
+        if len(joints) != n - offset:
+            raise MocapError(
+                f"{root / file}: {len(joints)} rows for a take of {n} frames (got {len(joints)}, "
+                f"expected {n - offset}: rows are frames {offset}..{n - 1}, joint_offset={offset})"
+            )
     for i, (s, c0, c1) in enumerate(windows):
         if not offset <= s <= c0 <= c1 < n:
             raise MocapError(
-                f"{task}_interaction_t.npy row {i}: [start, contact_begin, contact_end] = "
+                f"{windows_file} row {i}: [start, contact_begin, contact_end] = "
                 f"[{s}, {c0}, {c1}] must satisfy "
                 f"{offset} <= start <= contact_begin <= contact_end < {n}"
             )
@@ -421,46 +596,45 @@ def read_release(task: str, root: str | Path | None = None) -> Release:
         out[offset:] = j
         return out
 
-    def rotations(q):
-        norm = np.linalg.norm(q, axis=-1)
-        bad = ~(norm > 0.5)  # also catches NaN
-        q = np.where(bad[:, None], np.array([0.0, 0.0, 0.0, 1.0]), q)
-        r = CAPTURE_TO_SIM @ quat_xyzw_to_matrix(q)
-        r[bad] = np.nan
-        return r
-
-    return Release(
-        task=task,
-        root=root,
-        windows=windows.astype(np.int64),
-        palm_vec=palms @ CAPTURE_TO_SIM.T,
-        target_tips=None if tips is None else (tips[:, 0, 1:] - tips[:, 0, :1]) @ CAPTURE_TO_SIM.T,
-        target_rot=rotations(rot_t[:, :4]),
-        actor_rot=rotations(rot_a[:, :4]),
-        target_joints=aligned(joints_t),
-        actor_joints=aligned(joints_a),
-        joint_offset=offset,
-    )
+    with np.errstate(all="ignore"):  # damaged values become NaN/inf here, caught where used
+        target_rot, target_norm = _palm_rotations(rot_t[:, :4])
+        actor_rot, actor_norm = _palm_rotations(rot_a[:, :4])
+        points = None if tips is None else tips[:, 0].astype(np.float64) @ CAPTURE_TO_SIM.T
+        return Release(
+            task=task,
+            root=root,
+            windows=windows.astype(np.int64),
+            palm_vec=palms.astype(np.float64) @ CAPTURE_TO_SIM.T,
+            target_tips=None if points is None else points[:, 1:] - points[:, :1],
+            target_rot=target_rot,
+            actor_rot=actor_rot,
+            target_joints=aligned(joints_t),
+            actor_joints=aligned(joints_a),
+            joint_offset=offset,
+            target_quat_norm=target_norm,
+            actor_quat_norm=actor_norm,
+            target_points=points,
+        )
 
 
 def _check_window_finite(release: Release, row: int, s: int, c1: int) -> None:
-    """Raise MocapError when frames s..c1 (window ``row``) hold NaN/inf or bad quaternions."""
-    fields = {
-        "distance_array_palms": release.palm_vec,
-        "rot_human": release.target_rot,
-        "rot_robot": release.actor_rot,
-        "joint_angles_human": release.target_joints,
-        "joint_angles_robot": release.actor_joints,
-    }
-    for field, array in fields.items():
-        window = array[s : c1 + 1].reshape(c1 + 1 - s, -1)
-        bad = ~np.all(np.isfinite(window), axis=1)
-        if bad.any():
-            frame = s + int(np.argmax(bad))
-            raise MocapError(
-                f"{release.task}_{field}.npy: NaN/inf or zero quaternion at frame {frame}, inside "
-                f"window {row} [{s}, {c1}] of {release.task}_interaction_t.npy"
-            )
+    """Raise MocapError when frames s..c1 (window ``row``) hold NaN/inf, dropouts or values
+    outside the plausibility bounds (POSITION_BOUND, JOINT_ANGLE_BOUND, QUAT_NORM_TOLERANCE)."""
+    f = slice(s, c1 + 1)
+    frames = np.arange(s, c1 + 1)
+    context = f", inside window {row} [{s}, {c1}] of {release.task}_interaction_t.npy"
+    palm = _vector_norm(release.palm_vec[f])
+    checks = [
+        ("distance_array_palms", "palm-to-palm vector", "length", palm),
+        ("rot_human", "palm quaternion", "norm", release.target_quat_norm[f]),
+        ("rot_robot", "palm quaternion", "norm", release.actor_quat_norm[f]),
+        ("joint_angles_human", "joint", "angle", release.target_joints[f]),
+        ("joint_angles_robot", "joint", "angle", release.actor_joints[f]),
+    ]
+    for field, name, quantity, values in checks:
+        where = str(release.root / f"{release.task}_{field}.npy")
+        columns = HAND_JOINTS if quantity == "angle" else None
+        _check_bounds(where, name, quantity, values, frames, columns, context)
 
 
 CALIBRATION_LEAD_IN = 200
@@ -472,19 +646,25 @@ def calibration_samples(
     root: str | Path | None = None,
     tasks: tuple[str, ...] = ("handshake", "handclap"),
     lead_in: int = CALIBRATION_LEAD_IN,
+    joint_offsets: dict[str, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Target fingertips as measured (mocap palm frame) and as modelled (Shadow palm frame).
 
     Frames: every window of ``tasks`` from ``lead_in`` frames before its start to its
-    contact_end, where all inputs are finite.
+    contact_end, where all inputs are finite (capture dropouts are skipped); the values
+    of those frames must be within the plausibility bounds, and each task must have at
+    least one such frame (MocapError otherwise). ``joint_offsets``: per task, as
+    :func:`read_release`'s ``joint_offset`` (default: the authors' release's).
     Returns:
       measured: (N, 5, 3) fingertip - palm origin in mocap palm-body coordinates, in the
         release's fingertip order; modelled: (N, 5, 3) FK of the target joint angles in
         the Shadow palm frame (th, ff, mf, rf, lf).
     """
+    root = Path(root) if root is not None else REAL_DATA_PATH
+    joint_offsets = joint_offsets or {}
     measured, modelled = [], []
     for task in tasks:
-        rel = read_release(task, root)
+        rel = read_release(task, root, joint_offsets.get(task))
         if rel.target_tips is None:
             raise MocapError(f"{task}_distance_array_palms_1.npy is needed for the calibration")
         frames = np.unique(
@@ -492,12 +672,34 @@ def calibration_samples(
                 [np.arange(max(s - lead_in, rel.joint_offset), c1 + 1) for s, _, c1 in rel.windows]
             )
         )
-        local = np.einsum("tji,tkj->tki", rel.target_rot[frames], rel.target_tips[frames])
-        joints = rel.target_joints[frames]
-        ok = np.all(np.isfinite(local), axis=(1, 2)) & np.all(np.isfinite(joints), axis=1)
-        measured.append(local[ok])
+        finite = {
+            "distance_array_palms_1": np.isfinite(rel.target_points[frames]).all(axis=(1, 2)),
+            "rot_human": np.isfinite(rel.target_rot[frames]).all(axis=(1, 2)),
+            "joint_angles_human": np.isfinite(rel.target_joints[frames]).all(axis=1),
+        }
+        ok = np.logical_and.reduce(list(finite.values()))
+        if not ok.any():  # the fit would silently rest on the other tasks alone
+            empty = [name for name, f in finite.items() if not f.any()] or list(finite)
+            raise MocapError(
+                f"{root}: palm calibration has no usable frame of {task} (got 0 of "
+                f"{len(frames)} frames finite in "
+                + ", ".join(f"{task}_{name}.npy" for name in empty)
+                + ", expected at least 1); pass calibration= to skip the fit"
+            )
+        used, joints = frames[ok], rel.target_joints[frames[ok]]
+        files = {name: str(root / f"{task}_{name}.npy") for name in finite}
+        context = f", a calibration frame of {task}"
+        for name, what, quantity, values, columns in [
+            ("distance_array_palms_1", "target point vector", "length",
+             _vector_norm(rel.target_points[used]), ("palm",) + HAND_POINTS[1:]),
+            ("rot_human", "palm quaternion", "norm", rel.target_quat_norm[used], None),
+            ("joint_angles_human", "joint", "angle", joints, HAND_JOINTS),
+        ]:  # fmt: skip
+            _check_bounds(files[name], what, quantity, values, used, columns, context)
+        local = np.einsum("tji,tkj->tki", rel.target_rot[used], rel.target_tips[used])
+        measured.append(local)
         modelled.append(
-            hand_kinematics.forward_kinematics(to_model_convention(joints[ok])).points[:, 1:]
+            hand_kinematics.forward_kinematics(to_model_convention(joints)).points[:, 1:]
         )
     return np.concatenate(measured), np.concatenate(modelled)
 
@@ -519,6 +721,7 @@ def estimate_palm_calibration(
     root: str | Path | None = None,
     tasks: tuple[str, ...] = ("handshake", "handclap"),
     lead_in: int = CALIBRATION_LEAD_IN,
+    joint_offsets: dict[str, int] | None = None,
 ) -> PalmCalibration:
     """Fit the mocap-palm -> Shadow-palm transform to the target hand's fingertips.
 
@@ -527,14 +730,20 @@ def estimate_palm_calibration(
     Shadow FK of the target joint angles in the Shadow palm frame, up to one rigid
     transform (Kabsch with translation, pooled over the tasks' windows and lead-ins).
     The same transform is applied to both hands (same marker set-up). E.T. has no
-    fingertip array, so it is calibrated by the other tasks.
+    fingertip array, so it is calibrated by the other tasks. ``joint_offsets`` as in
+    :func:`calibration_samples`.
     """
-    return fit_palm_calibration(*calibration_samples(root, tasks, lead_in))
+    return fit_palm_calibration(*calibration_samples(root, tasks, lead_in, joint_offsets))
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_calibration(root: str) -> PalmCalibration:
-    """The default calibration of a release: fitted to whichever fingertip arrays it has."""
+def _cached_calibration(
+    root: str, joint_offsets: tuple[tuple[str, int], ...] = ()
+) -> PalmCalibration:
+    """The default calibration of a release: fitted to whichever fingertip arrays it has.
+
+    joint_offsets: (task, offset) pairs for tasks that differ from the authors' release.
+    """
     tasks = tuple(
         t
         for t in ("handshake", "handclap")
@@ -545,7 +754,7 @@ def _cached_calibration(root: str) -> PalmCalibration:
             f"{root} has no handshake/handclap_distance_array_palms_1.npy to fit the palm "
             "calibration to; pass calibration= explicitly"
         )
-    return estimate_palm_calibration(root, tasks)
+    return estimate_palm_calibration(root, tasks, joint_offsets=dict(joint_offsets))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -669,6 +878,7 @@ def load_optitrack(
     lead_in: int = 0,
     align_et_index: bool = True,
     approach: bool = True,
+    joint_offset: int | None = None,
 ) -> list[Demonstration]:
     """The authors' demonstrations of one task, one per row of ``<task>_interaction_t.npy``.
 
@@ -684,17 +894,25 @@ def load_optitrack(
         clap's) at the approach instead (:func:`approach_start`).
       align_et_index: for "et", correct the actor palm pose so that the index tips meet
         during contact (:func:`estimate_index_alignment`).
+      joint_offset: capture frames before the first joint-angle row of ``task`` (see
+        :func:`read_release`); default: the authors' release's, ``RELEASE_JOINT_OFFSET``.
     Returns:
       Demonstrations named ``<task>/optitrack/<row>``; actor fingertips by FK of the actor
       joints from the actor palm pose, target fingertips by FK of the target joints.
+    Raises:
+      MocapError naming the file for damaged, inconsistent or implausible data in any
+      frame used (see :func:`read_release` and the ``*_BOUND`` constants).
     """
     _check_task(task)
     root = Path(root) if root is not None else REAL_DATA_PATH
-    release = read_release(task, root)
-    cal = calibration if calibration is not None else _cached_calibration(str(root.resolve()))
+    release = read_release(task, root, joint_offset)
+    offsets = () if joint_offset is None else ((task, joint_offset),)
+    cal = calibration
+    if cal is None:
+        cal = _cached_calibration(str(root.resolve()), offsets)
     c, o = cal.rotation, cal.offset
     demos = []
-    distance = np.linalg.norm(release.palm_vec, axis=-1)
+    distance = _vector_norm(release.palm_vec)
     previous_end = release.joint_offset
     for row, (s0, c0, c1) in enumerate(release.windows):
         s = max(int(s0) - lead_in, release.joint_offset)
@@ -743,6 +961,17 @@ _NPZ_PER_FRAME = {
     "actor_palm_pos": (3,),
     "actor_palm_quat": (4,),
 }
+_NPZ_DTYPES = {
+    "schema_version": "int",
+    "task": "str",
+    "names": "str",
+    "fps": "float",
+    "num_frames": "int",
+    "contact_begin": "int",
+    "contact_end": "int",
+    **{key: "float" for key in _NPZ_PER_FRAME},
+}
+"""Every array of the npz layout and the dtype kind it must have (see :func:`_check_dtype`)."""
 
 
 def demos_to_arrays(demos: list[Demonstration]) -> dict[str, np.ndarray]:
@@ -776,50 +1005,106 @@ def save_npz(demos: list[Demonstration], file: str | Path) -> None:
     np.savez_compressed(file, **demos_to_arrays(demos))
 
 
+def _npz_frame_checks(where: str, arrays: dict[str, np.ndarray]) -> None:
+    """Plausibility bounds on every frame of the per-frame arrays (NaN/inf included)."""
+    for key, quantity, columns in [
+        ("actor_joints", "angle", HAND_JOINTS),
+        ("target_joints", "angle", HAND_JOINTS),
+        ("actor_palm_pos", "length", None),
+        ("actor_palm_quat", "norm", None),
+    ]:
+        values = arrays[key] if quantity == "angle" else _vector_norm(arrays[key])
+        _check_bounds(where, key, quantity, values, columns=columns, at="row")
+
+
 def demos_from_arrays(arrays, task: str, source: str, where: str = "arrays") -> list[Demonstration]:
-    """Inverse of demos_to_arrays (fingertips recomputed by FK). ``where`` names the file."""
-    for key in ("schema_version", "task", *_NPZ_PER_DEMO, *_NPZ_PER_FRAME):
-        if key not in arrays:
-            raise MocapError(f"{where}: missing array {key!r}")
-    if int(arrays["schema_version"]) != SCHEMA_VERSION:
+    """Inverse of demos_to_arrays (fingertips recomputed by FK). ``where`` names the file.
+
+    Checks every array's presence, dtype and shape, the values of every frame against the
+    plausibility bounds, and that there is at least one demonstration; unknown arrays are
+    an error too (nothing in a file is silently ignored). Raises MocapError naming
+    ``where`` and the array.
+    """
+    missing = [key for key in _NPZ_DTYPES if key not in arrays]
+    if missing:
+        raise MocapError(f"{where}: missing array {missing[0]!r}")
+    unknown = sorted(set(arrays) - set(_NPZ_DTYPES))
+    if unknown:
         raise MocapError(
-            f"{where}: schema_version {int(arrays['schema_version'])}, expected {SCHEMA_VERSION}"
+            f"{where}: unknown array {unknown[0]!r} (got {len(arrays)} arrays, expected "
+            f"only {', '.join(_NPZ_DTYPES)} of schema {SCHEMA_VERSION})"
         )
-    if str(arrays["task"]) != task:
-        raise MocapError(f"{where}: holds task {str(arrays['task'])!r}, expected {task!r}")
-    lengths = np.asarray(arrays["num_frames"])
-    n = len(lengths)
+    a = {key: np.asarray(arrays[key]) for key in _NPZ_DTYPES}
+    for key, kind in _NPZ_DTYPES.items():
+        _check_dtype(where, key, a[key], kind)
+    _check_shape(where, "schema_version", a["schema_version"], ())
+    if int(a["schema_version"]) != SCHEMA_VERSION:
+        raise MocapError(
+            f"{where}: schema_version {int(a['schema_version'])}, expected {SCHEMA_VERSION}"
+        )
+    _check_shape(where, "task", a["task"], ())
+    if str(a["task"]) != task:
+        raise MocapError(f"{where}: holds task {str(a['task'])!r}, expected {task!r}")
+    if a["num_frames"].ndim != 1:
+        raise MocapError(f"{where}: num_frames must have shape (N,), got {a['num_frames'].shape}")
+    n = len(a["num_frames"])
     for key in _NPZ_PER_DEMO:
-        if np.shape(arrays[key]) != (n,):
-            raise MocapError(f"{where}: {key} must have shape ({n},), got {np.shape(arrays[key])}")
-    total = int(lengths.sum())
+        _check_shape(where, key, a[key], (n,))
+    if n == 0:
+        raise MocapError(f"{where}: no demonstrations (got 0, expected at least 1)")
+    lengths = [int(x) for x in a["num_frames"]]  # Python ints: no overflow in the sum
+    if min(lengths) < 2:
+        i = int(np.argmin(lengths))
+        raise MocapError(
+            f"{where}: num_frames of demonstration {i} too small (got {lengths[i]}, expected >= 2)"
+        )
+    total = sum(lengths)
     for key, tail in _NPZ_PER_FRAME.items():
-        if np.shape(arrays[key]) != (total, *tail):
-            raise MocapError(
-                f"{where}: {key} must have shape {(total, *tail)}, got {np.shape(arrays[key])}"
-            )
-        if not np.all(np.isfinite(arrays[key])):
-            raise MocapError(f"{where}: {key} has NaN/inf values")
+        _check_shape(where, key, a[key], (total, *tail))
+    _npz_frame_checks(where, a)
     bounds = np.concatenate([[0], np.cumsum(lengths)])
     demos = []
     for i in range(n):
         f = slice(int(bounds[i]), int(bounds[i + 1]))
-        quat = np.asarray(arrays["actor_palm_quat"][f], np.float64)
-        demos.append(
-            build_demonstration(
+        quat = np.asarray(a["actor_palm_quat"][f], np.float64)
+        try:
+            demo = build_demonstration(
                 task=task,
-                name=str(arrays["names"][i]),
+                name=str(a["names"][i]),
                 source=source,
-                fps=float(arrays["fps"][i]),
-                actor_joints=arrays["actor_joints"][f],
-                target_joints=arrays["target_joints"][f],
-                actor_palm_pos=arrays["actor_palm_pos"][f],
+                fps=float(a["fps"][i]),
+                actor_joints=a["actor_joints"][f],
+                target_joints=a["target_joints"][f],
+                actor_palm_pos=a["actor_palm_pos"][f],
                 actor_palm_rot=quat_wxyz_to_matrix(quat),
-                contact_begin=int(arrays["contact_begin"][i]),
-                contact_end=int(arrays["contact_end"][i]),
+                contact_begin=int(a["contact_begin"][i]),
+                contact_end=int(a["contact_end"][i]),
             )
-        )
+        except MocapError as e:  # Demonstration.validate names the demonstration only
+            raise MocapError(f"{where}: {e}") from e
+        demos.append(demo)
     return demos
+
+
+def _read_npz(file: Path) -> dict[str, np.ndarray]:
+    """Every array of the npz archive ``file``; MocapError naming the file (and array) for
+    any damage: NumPy and zipfile raise many types (BadZipFile, EOFError, zlib.error...)."""
+    try:
+        archive = np.load(file, allow_pickle=False)
+    except Exception as e:
+        raise MocapError(f"{file}: cannot read the archive ({type(e).__name__}: {e})") from e
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise MocapError(f"{file}: not an npz archive (got a single {type(archive).__name__})")
+    with archive:
+        arrays = {}
+        for key in archive.files:
+            try:
+                arrays[key] = archive[key]
+            except Exception as e:
+                raise MocapError(
+                    f"{file}: cannot read array {key!r} ({type(e).__name__}: {e})"
+                ) from e
+    return arrays
 
 
 def load_synthetic(task: str, path: str | Path | None = None) -> list[Demonstration]:
@@ -830,8 +1115,7 @@ def load_synthetic(task: str, path: str | Path | None = None) -> list[Demonstrat
         raise MocapError(
             f"missing synthetic demonstrations {file}; run `python -m mjx_hands.synthetic_demos`"
         )
-    with np.load(file, allow_pickle=False) as arrays:
-        return demos_from_arrays(dict(arrays), task, "synthetic", where=str(file))
+    return demos_from_arrays(_read_npz(file), task, "synthetic", where=str(file))
 
 
 def load_demonstrations(

@@ -3,12 +3,18 @@ synthetic files, and the loader's errors. CPU only, a few seconds."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import itertools
+import re
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import real_data_or_skip
+from hypothesis import event, given, settings
+from hypothesis import strategies as st
 
 from mjx_hands import hand_kinematics, mocap, synthetic_demos, tasks
 from mjx_hands.shadow_hand import HAND_JOINTS, HAND_POINTS
@@ -269,7 +275,12 @@ def test_synthetic_contact_poses_match_real_data(real, synthetic):
 
 
 # ------------------------------------------------------------------------------ errors
-def _fake_release(root: Path, task: str = "handshake", frames: int = 40) -> Path:
+def _fake_release(
+    root: Path, task: str = "handshake", frames: int = 40, joint_offset: int | None = None
+) -> Path:
+    """A small release of one task: two windows, joint rows end-aligned like the authors'."""
+    if joint_offset is None:
+        joint_offset = mocap.RELEASE_JOINT_OFFSET[task]
     rng = np.random.default_rng(0)
     q = np.tile([0.0, 0.0, 0.0, 1.0], 6)
     palm = np.array([0.0, 0.0, 0.2]) + rng.normal(0, 0.01, (frames, 3))
@@ -280,8 +291,8 @@ def _fake_release(root: Path, task: str = "handshake", frames: int = 40) -> Path
         "distance_array_palms_1": np.concatenate([palm[:, None], tips], 1)[:, None],
         "rot_human": np.tile(q, (frames, 1)),
         "rot_robot": np.tile(q, (frames, 1)),
-        "joint_angles_human": np.zeros((frames - 1, 20)),
-        "joint_angles_robot": np.zeros((frames - 1, 20)),
+        "joint_angles_human": np.zeros((frames - joint_offset, 20)),
+        "joint_angles_robot": np.zeros((frames - joint_offset, 20)),
     }
     for name, value in arrays.items():
         np.save(root / f"{task}_{name}.npy", value)
@@ -361,3 +372,452 @@ def test_error_corrupt_synthetic_file(tmp_path):
     np.savez(tmp_path / "handclap.npz", **arrays)
     with pytest.raises(mocap.MocapError, match="actor_joints must have shape"):
         mocap.load_synthetic("handclap", tmp_path)
+
+
+# ------------------------------------------- strict loaders: damaged, wrong or empty data
+def _tiny_arrays(task: str = "handclap") -> dict[str, np.ndarray]:
+    """The npz layout of two short demonstrations (6 and 5 frames), float32 like the files."""
+    rng = np.random.default_rng(1)
+    frames = 11
+    quat = np.concatenate([np.ones((frames, 1)), rng.normal(0, 0.1, (frames, 3))], 1)
+    palm = np.array([0.05, -0.02, 0.2]) + rng.normal(0, 0.02, (frames, 3))
+    return {
+        "schema_version": np.int64(mocap.SCHEMA_VERSION),
+        "task": np.str_(task),
+        "names": np.array([f"{task}/synthetic/00", f"{task}/synthetic/01"]),
+        "fps": np.array([120.0, 120.0]),
+        "num_frames": np.array([6, 5]),
+        "contact_begin": np.array([3, 2]),
+        "contact_end": np.array([5, 4]),
+        "actor_joints": rng.uniform(-0.2, 0.2, (frames, 20)).astype(np.float32),
+        "target_joints": rng.uniform(-0.2, 0.2, (frames, 20)).astype(np.float32),
+        "actor_palm_pos": palm.astype(np.float32),
+        "actor_palm_quat": (quat / np.linalg.norm(quat, axis=1, keepdims=True)).astype(np.float32),
+    }
+
+
+def _write_npz(root: Path, arrays: dict, compressed: bool = True, task: str = "handclap") -> Path:
+    file = root / f"{task}.npz"
+    (np.savez_compressed if compressed else np.savez)(file, **arrays)
+    return file
+
+
+def _assert_same(a: list[mocap.Demonstration], b: list[mocap.Demonstration]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        for field in dataclasses.fields(x):
+            np.testing.assert_array_equal(getattr(x, field.name), getattr(y, field.name))
+
+
+def _assert_plausible(demos: list[mocap.Demonstration], slack: float = 0.0) -> None:
+    """Valid demonstrations whose palm positions and joints are inside the documented bounds."""
+    lower, upper = hand_kinematics.joint_range()
+    assert demos
+    for d in demos:
+        d.validate()
+        assert np.all(np.linalg.norm(d.actor_points[:, 0], axis=-1) <= mocap.POSITION_BOUND + slack)
+        for joints in (d.actor_joints, d.target_joints):
+            assert np.all(joints >= lower) and np.all(joints <= upper)
+
+
+# Case 1: damaged archives and members of the wrong type.
+@pytest.mark.parametrize("how", ["truncated", "bad_crc", "empty", "garbage"])
+def test_error_damaged_npz_names_file(tmp_path, how):
+    arrays = _tiny_arrays()
+    file = _write_npz(tmp_path, arrays, compressed=False)
+    data = file.read_bytes()
+    if how == "truncated":
+        data = data[: len(data) // 2]
+    elif how == "bad_crc":  # one flipped byte inside actor_joints' stored data
+        at = data.index(arrays["actor_joints"].tobytes()[:32]) + 8
+        data = data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1 :]
+    elif how == "empty":
+        data = b""
+    else:
+        data = bytes(range(256)) * 8
+    file.write_bytes(data)
+    with pytest.raises(mocap.MocapError, match=re.escape(str(file))):
+        mocap.load_synthetic("handclap", tmp_path)
+
+
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("schema_version", np.array([1, 1])),
+        ("actor_joints", np.full((11, 20), "0.1")),
+        ("names", np.array(["handclap/synthetic/00", "handclap/synthetic/01"], dtype=object)),
+        ("fps", np.array([120.0, 120.0], dtype=object)),
+    ],
+)
+def test_error_npz_member_type_names_file_and_array(tmp_path, key, value):
+    file = _write_npz(tmp_path, {**_tiny_arrays(), key: value})
+    with pytest.raises(mocap.MocapError, match=f"{re.escape(str(file))}: .*{key}"):
+        mocap.load_synthetic("handclap", tmp_path)
+
+
+# Case 2: every array's dtype is checked (nothing is converted into wrong angles).
+@pytest.mark.parametrize("dtype", [bool, np.int64, "datetime64[s]", str, np.complex128])
+def test_error_release_joint_angle_dtype(tmp_path, dtype):
+    root = _fake_release(tmp_path)
+    file = root / "handshake_joint_angles_robot.npy"
+    joints = np.load(file) + 0.5
+    if dtype == "datetime64[s]":
+        bad = joints.astype(np.int64).astype(dtype)
+    elif dtype is np.complex128:
+        bad = joints + 0.1j  # the imaginary part would be dropped
+    else:
+        bad = joints.astype(dtype)
+    np.save(file, bad)
+    match = f"handshake_joint_angles_robot.npy: .*{re.escape(str(bad.dtype))}.*float"
+    with pytest.raises(mocap.MocapError, match=match):
+        _load(root)
+
+
+def test_release_accepts_real_float_dtypes(tmp_path):
+    root = _fake_release(tmp_path)
+    expected = _load(root)
+    for dtype in (np.float32, np.float16, ">f8"):
+        for name in ("joint_angles_human", "joint_angles_robot", "rot_robot"):
+            file = root / f"handshake_{name}.npy"
+            np.save(file, np.load(file).astype(dtype))
+        demos = _load(root)
+        for d, e in zip(demos, expected):
+            np.testing.assert_allclose(d.actor_palm_rot, e.actor_palm_rot, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    "key, dtype, expected",
+    [
+        ("actor_joints", np.complex64, "float"),
+        ("num_frames", np.float64, "integer"),
+        ("names", np.int64, "str"),
+        ("fps", bool, "float"),
+        ("task", "S9", "str"),
+        ("contact_begin", "datetime64[s]", "integer"),
+    ],
+)
+def test_error_npz_member_dtype(tmp_path, key, dtype, expected):
+    arrays = _tiny_arrays()
+    value = arrays[key]
+    value = value.astype(np.int64).astype(dtype) if key == "contact_begin" else value
+    value = np.zeros(value.shape, dtype) if key == "names" else value.astype(dtype)
+    file = _write_npz(tmp_path, {**arrays, key: value})
+    match = f"{re.escape(str(file))}: {key} .*{re.escape(str(value.dtype))}.*{expected}"
+    with pytest.raises(mocap.MocapError, match=match):
+        mocap.load_synthetic("handclap", tmp_path)
+
+
+# Case 3: joint rows cannot shift silently against the capture frames.
+def test_error_release_joint_rows_cut_short(tmp_path):
+    root = _fake_release(tmp_path)
+    for side in ("human", "robot"):
+        file = root / f"handshake_joint_angles_{side}.npy"
+        np.save(file, np.load(file)[:-2])
+    with pytest.raises(mocap.MocapError, match=r"joint_angles_human.npy: .*37.*40.*expected 39"):
+        _load(root)
+
+
+def test_error_release_npy_header_claims_fewer_rows(tmp_path):
+    root = _fake_release(tmp_path)
+    for side in ("human", "robot"):
+        file = root / f"handshake_joint_angles_{side}.npy"
+        data = file.read_bytes()
+        file.write_bytes(data.replace(b"(39, 20)", b"(38, 20)", 1))
+    with pytest.raises(mocap.MocapError, match="handshake_joint_angles_human.npy"):
+        _load(root)
+
+
+def test_release_joint_offset_parameter(tmp_path):
+    (tmp_path / "a").mkdir()
+    root = _fake_release(tmp_path / "a", joint_offset=3)  # a release with 3 frames unjointed
+    with pytest.raises(mocap.MocapError, match=r"joint_angles_human.npy: .*expected 39"):
+        _load(root)
+    assert mocap.read_release("handshake", root, joint_offset=3).joint_offset == 3
+    demos = mocap.load_optitrack(
+        "handshake", root, calibration=mocap.ORIGINAL_CALIBRATION, joint_offset=3
+    )
+    assert [d.num_frames for d in demos] == [26, 30]
+    # The default calibration reads this task with the given offset too.
+    assert len(mocap.load_optitrack("handshake", root, joint_offset=3)) == 2
+    (tmp_path / "et").mkdir()
+    et = _fake_release(tmp_path / "et", "et")  # E.T.'s default offset is 3
+    assert mocap.read_release("et", et).joint_offset == mocap.RELEASE_JOINT_OFFSET["et"] == 3
+
+
+# Case 4: plausibility bounds, with the numbers in the message.
+@pytest.mark.parametrize(
+    "name, index, value, match",
+    [
+        ("distance_array_palms", (12, 0, 0, 0), 1e6, r"frame 12.*got 1e\+06 m, expected 0\.\.3 m"),
+        ("distance_array_palms", (12, 0, 0, 0), 1e308, r"frame 12.*got 1e\+308 m"),
+        ("joint_angles_robot", (20, 3), 4.0, r"frame 21.*THJ3.*got 4 rad.*3\.14159"),
+        ("rot_robot", (15, slice(0, 4)), [0, 0, 0, 0.7], r"frame 15.*got 0\.7, expected 0\.9"),
+        ("rot_human", (15, slice(0, 4)), [0, 0, 0, 2.0], r"frame 15.*got 2, expected"),
+    ],
+)
+def test_error_release_implausible_inside_window(tmp_path, name, index, value, match):
+    root = _fake_release(tmp_path)
+    file = root / f"handshake_{name}.npy"
+    array = np.load(file)
+    array[index] = value
+    np.save(file, array)
+    with pytest.raises(mocap.MocapError, match=f"handshake_{name}.npy: .*{match}"):
+        _load(root)
+
+
+def test_release_outside_windows_keeps_dropouts(tmp_path):
+    root = _fake_release(tmp_path)
+    expected = _load(root)
+    for name, index, value in [
+        ("rot_robot", (2, slice(0, 4)), 0.0),  # dropout: zero quaternion
+        ("rot_human", (3, slice(0, 4)), np.nan),
+        ("joint_angles_robot", (1, 4), 1e6),  # frame 2: before every window
+    ]:
+        file = root / f"handshake_{name}.npy"
+        array = np.load(file)
+        array[index] = value
+        np.save(file, array)
+    _assert_same(_load(root), expected)
+
+
+def test_error_release_implausible_calibration_frame(tmp_path):
+    root = _fake_release(tmp_path)
+    file = root / "handshake_distance_array_palms_1.npy"
+    array = np.load(file)
+    array[3, 0, 2] = [1e6, 0.0, 0.0]  # frame 3 enters the calibration fit (lead-in)
+    np.save(file, array)
+    with pytest.raises(mocap.MocapError, match=r"palms_1.npy: .*frame 3.*got 1e\+06 m"):
+        mocap.load_optitrack("handshake", root)
+
+
+@pytest.mark.parametrize(
+    "key, index, value, match",
+    [
+        ("actor_palm_pos", (7, 2), 1e6, r"row 7.*got 1e\+06 m, expected 0\.\.3 m"),
+        ("target_joints", (3, 5), 4.0, r"row 3.*THJ1.*got 4 rad"),
+        ("actor_palm_quat", (9,), [0.5, 0.0, 0.0, 0.0], r"row 9.*got 0\.5, expected 0\.9"),
+    ],
+)
+def test_error_npz_implausible_values(tmp_path, key, index, value, match):
+    arrays = _tiny_arrays()
+    arrays[key][index] = value
+    file = _write_npz(tmp_path, arrays)
+    with pytest.raises(mocap.MocapError, match=f"{re.escape(str(file))}: {key} .*{match}"):
+        mocap.load_synthetic("handclap", tmp_path)
+
+
+# Case 5: empty inputs.
+def test_error_release_without_windows(tmp_path):
+    root = _fake_release(tmp_path)
+    np.save(root / "handshake_interaction_t.npy", np.zeros((0, 3), np.int64))
+    for calibration in (mocap.ORIGINAL_CALIBRATION, None):
+        with pytest.raises(mocap.MocapError, match=r"interaction_t.npy: .*got 0 rows"):
+            mocap.load_optitrack("handshake", root, calibration=calibration)
+
+
+def test_error_npz_without_demonstrations(tmp_path):
+    arrays = {key: value[:0] if value.ndim else value for key, value in _tiny_arrays().items()}
+    file = _write_npz(tmp_path, arrays)
+    with pytest.raises(mocap.MocapError, match=f"{re.escape(str(file))}: .*no demonstrations"):
+        mocap.load_synthetic("handclap", tmp_path)
+
+
+def test_error_calibration_frames_all_nonfinite(tmp_path):
+    root = _fake_release(_fake_release(tmp_path, "handclap"))
+    file = root / "handshake_distance_array_palms_1.npy"
+    np.save(file, np.full_like(np.load(file), np.nan))
+    with pytest.raises(mocap.MocapError, match="handshake.*handshake_distance_array_palms_1.npy"):
+        mocap.load_optitrack("handclap", root)
+
+
+# Fuzz: any damage gives a MocapError naming the damaged file, or plausible demonstrations
+# (unchanged ones where the damage cannot matter); never another exception.
+_FUZZ_DTYPES = (
+    "bool", "int8", "uint16", "int64", "float16", "float32", "float64", ">f8", "complex128",
+    "datetime64[s]", "U6", "S6", "object",
+)  # fmt: skip
+_FLOATS = (np.nan, np.inf, -np.inf, 0.0, -1.0, 0.5, 3.5, 1e6, 1e308, -1e308, 1e-310)
+_INTS = (-1, 0, 1, 5, 39, 40, 2**31, -(2**40))
+_STRINGS = ("", "handclap", "et", "x" * 30)
+
+
+def _accepts(kind: str, dtype: np.dtype) -> bool:
+    return {"float": "f", "int": "iu", "str": "U"}[kind].find(dtype.kind) >= 0
+
+
+def _cast(array: np.ndarray, dtype: str) -> np.ndarray:
+    try:
+        return array.astype(dtype)
+    except (TypeError, ValueError):  # e.g. names -> float: the dtype is what matters
+        return np.zeros(array.shape, dtype)
+
+
+def _reshape(array: np.ndarray, op: str) -> np.ndarray:
+    if op == "add_axis":
+        return array[None]
+    if op == "double":
+        return np.stack([array, array])
+    if array.ndim == 0:
+        return array.reshape(1)
+    return {
+        "drop_first": lambda a: a[1:],
+        "drop_last": lambda a: a[:-1],
+        "flatten": lambda a: a.reshape(-1),
+        "drop_column": lambda a: a[..., :-1],
+    }[op](array)
+
+
+def _damage_bytes(data: bytes, draw) -> bytes:
+    op = draw(st.sampled_from(["truncate", "flip", "append", "empty", "garbage"]))
+    at = draw(st.integers(0, max(len(data) - 1, 0)))
+    if op == "truncate":
+        return data[:at]
+    if op == "flip":
+        return data[:at] + bytes([data[at] ^ draw(st.integers(1, 255))]) + data[at + 1 :]
+    if op == "append":
+        return data + draw(st.binary(min_size=1, max_size=64))
+    return b"" if op == "empty" else draw(st.binary(max_size=600))
+
+
+def _mutate(array: np.ndarray, kind: str, draw) -> tuple[np.ndarray, str]:
+    """A damaged copy of array and what was done: "dtype-ok", "dtype-bad" or "other"."""
+    op = draw(st.sampled_from(["dtype", "value", "shape"]))
+    if op == "dtype":
+        out = _cast(array, draw(st.sampled_from(_FUZZ_DTYPES)))
+        return out, "dtype-ok" if _accepts(kind, out.dtype) else "dtype-bad"
+    if op == "shape":
+        ops = ["add_axis", "double", "drop_first", "drop_last", "flatten", "drop_column"]
+        return _reshape(array, draw(st.sampled_from(ops))), "other"
+    out = array.copy()
+    values = {"float": _FLOATS, "int": _INTS, "str": _STRINGS}[kind]
+    if out.size:
+        with np.errstate(over="ignore", invalid="ignore"):
+            out.flat[draw(st.integers(0, out.size - 1))] = draw(st.sampled_from(values))
+    return out, "other"
+
+
+_RELEASE_KINDS = {
+    "interaction_t": "int",
+    "distance_array_palms": "float",
+    "distance_array_palms_1": "float",
+    "rot_human": "float",
+    "rot_robot": "float",
+    "joint_angles_human": "float",
+    "joint_angles_robot": "float",
+}
+
+
+@functools.cache
+def _release_baseline(calibrated: bool) -> list[mocap.Demonstration]:
+    with tempfile.TemporaryDirectory() as folder:
+        root = _fake_release(Path(folder))
+        return mocap.load_optitrack(
+            "handshake", root, calibration=None if calibrated else mocap.ORIGINAL_CALIBRATION
+        )
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data())
+def test_fuzz_release_loader(tmp_path_factory, data):
+    draw = data.draw
+    root = _fake_release(tmp_path_factory.mktemp("release"))
+    name = draw(st.sampled_from(sorted(_RELEASE_KINDS)))
+    file = root / f"handshake_{name}.npy"
+    calibrated = draw(st.booleans())
+    array = np.load(file)
+    how = draw(st.sampled_from(["array", "bytes", "noop", "outside"]))
+    if how == "array":
+        array, how = _mutate(array, _RELEASE_KINDS[name], draw)
+        np.save(file, array)
+    elif how == "bytes":
+        file.write_bytes(_damage_bytes(file.read_bytes(), draw))
+    elif how == "noop":  # byte order and memory layout do not change the data
+        op = draw(st.sampled_from(["byteswap", "fortran"]))
+        swapped = array.astype(array.dtype.newbyteorder())
+        np.save(file, swapped if op == "byteswap" else np.asfortranarray(array))
+    elif name not in ("interaction_t", "distance_array_palms"):
+        # Before every window (frames 0-4; joint rows are frames + 1): unused unless the
+        # calibration's lead-in reaches it (then it must still be plausible or an error).
+        rows = slice(0, 4) if name.startswith("joint") else slice(0, 5)
+        array[rows] = draw(st.sampled_from(_FLOATS))
+        np.save(file, array)
+    try:
+        demos = mocap.load_optitrack(
+            "handshake", root, calibration=None if calibrated else mocap.ORIGINAL_CALIBRATION
+        )
+    except mocap.MocapError as err:
+        event(f"{how}: MocapError")
+        assert how not in ("noop", "outside") or (how == "outside" and calibrated), err
+        assert file.name in str(err)
+        return
+    event(f"{how}: loaded")
+    assert how != "dtype-bad", f"{name} accepted as {array.dtype}"
+    # The palm centre moves by at most twice the calibration offset from the mocap origin.
+    offset = mocap.estimate_palm_calibration(root, ("handshake",)).offset if calibrated else 0
+    _assert_plausible(demos, slack=2 * np.linalg.norm(offset) + 1e-9)
+    if how == "noop" or (how == "outside" and not calibrated):
+        _assert_same(demos, _release_baseline(calibrated))
+
+
+_NPZ_KINDS = {
+    "schema_version": "int",
+    "task": "str",
+    "names": "str",
+    "fps": "float",
+    "num_frames": "int",
+    "contact_begin": "int",
+    "contact_end": "int",
+    "actor_joints": "float",
+    "target_joints": "float",
+    "actor_palm_pos": "float",
+    "actor_palm_quat": "float",
+}
+
+
+@functools.cache
+def _npz_baseline() -> list[mocap.Demonstration]:
+    with tempfile.TemporaryDirectory() as folder:
+        _write_npz(Path(folder), _tiny_arrays())
+        return mocap.load_synthetic("handclap", folder)
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data())
+def test_fuzz_npz_loader(tmp_path_factory, data):
+    draw = data.draw
+    root = tmp_path_factory.mktemp("npz")
+    arrays = _tiny_arrays()
+    key = draw(st.sampled_from(sorted(_NPZ_KINDS)))
+    how = draw(st.sampled_from(["array", "bytes", "noop", "missing", "extra"]))
+    compressed = True
+    if how == "array":
+        arrays[key], how = _mutate(np.asarray(arrays[key]), _NPZ_KINDS[key], draw)
+    elif how == "noop":  # storage details that must not change the data
+        op = draw(st.sampled_from(["uncompressed", "float64", "byteswap", "reversed"]))
+        compressed = op != "uncompressed"
+        value = np.asarray(arrays[key])
+        if op == "float64" and value.dtype.kind == "f":
+            arrays[key] = value.astype(np.float64)
+        elif op == "byteswap":
+            arrays[key] = value.astype(value.dtype.newbyteorder())
+        elif op == "reversed":
+            arrays = dict(reversed(arrays.items()))
+    elif how == "missing":
+        del arrays[key]
+    elif how == "extra":
+        arrays[f"{key}_extra"] = np.zeros(3)
+    file = _write_npz(root, arrays, compressed)
+    if how == "bytes":
+        file.write_bytes(_damage_bytes(file.read_bytes(), draw))
+    try:
+        demos = mocap.load_synthetic("handclap", root)
+    except mocap.MocapError as err:
+        event(f"{how}: MocapError")
+        assert how != "noop", err
+        assert str(file) in str(err)
+        return
+    event(f"{how}: loaded")
+    assert how not in ("dtype-bad", "missing", "extra"), f"{how} {key} accepted"
+    _assert_plausible(demos)
+    if how in ("noop", "bytes"):  # zip CRCs: damaged bytes never load as other data
+        _assert_same(demos, _npz_baseline())
