@@ -344,6 +344,23 @@ def _from_checkpoint_trees(trees: list[dict[str, Any]], fresh: TrainerState, alg
     return algo.to_devices(stack_members(members))
 
 
+def memory_use() -> dict[str, float]:
+    """Host memory now and at its peak, and device memory where the device counts it
+    (accelerators; CPU does not), GiB: logged every epoch so growth shows."""
+    stats = jax.devices()[0].memory_stats() or {}
+    use = {
+        f"memory/device_{name}_gib": stats[key] / 2**30
+        for name, key in (("peak", "peak_bytes_in_use"), ("in_use", "bytes_in_use"))
+        if key in stats
+    }
+    # ru_maxrss is KiB on Linux; the resident set now from /proc (Linux only).
+    use["memory/host_peak_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    with contextlib.suppress(OSError, IndexError, ValueError):
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+        use["memory/host_rss_gib"] = pages * os.sysconf("SC_PAGE_SIZE") / 2**30
+    return use
+
+
 def read_config_json(path: Path) -> dict[str, Any]:
     """A run's config.json as a dict; a damaged file is an error naming it."""
     try:
@@ -533,7 +550,18 @@ class RunDirectory:
         self.best = max(
             (r for r in self.log.rows if "eval/success" in r), key=eval_rank, default=None
         )
+        if self.best is not None and not self._best_saved(int(self.best["epoch"])):
+            self.best = None  # killed while saving it: the next evaluation saves a best
         self.last_saved = start_epoch
+
+    def _best_saved(self, epoch: int) -> bool:
+        """Whether best/ holds an intact policy of ``epoch``; a damaged one is set aside."""
+        if epoch not in checkpoint.steps(self.best_dir):
+            return False
+        if checkpoint.damage(self.best_dir, epoch) is None:
+            return True
+        checkpoint.discard_after(self.best_dir, epoch - 1)
+        return False
 
     def wall_offset(self) -> float:
         """Seconds a resumed run had already run (its kept rows' wall clock)."""
@@ -777,13 +805,7 @@ def run_population(
                 common["time/population_env_steps_per_second"] = (
                     len(runs) * steps_per_epoch / seconds
                 )
-            peak = (jax.devices()[0].memory_stats() or {}).get("peak_bytes_in_use")
-            if peak is not None:  # accelerators count; CPU does not
-                common["memory/device_peak_gib"] = peak / 2**30
-            # ru_maxrss is KiB on Linux.
-            common["memory/host_peak_gib"] = (
-                resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-            )
+            common |= memory_use()
             rows = [common | m for m in metrics]
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started

@@ -1,9 +1,10 @@
 """A point-reach training run in its own process, for the fault-injection tests to kill.
 
-    python tests/point_reach_worker.py RUN_DIR EPOCHS [--hold-before-digest STEP]
+    python tests/point_reach_worker.py RUN_DIR EPOCHS [--hold-before-digest FOLDER/STEP]
 
-``--hold-before-digest STEP`` stops (sleeps) once Orbax has written checkpoint STEP and
-before its digest is, after printing ``holding STEP``: a kill then lands mid-save.
+``--hold-before-digest checkpoints/3`` (or ``best/2``) stops (sleeps) once Orbax has
+written that step and before its digest is, after printing ``holding checkpoints/3``: a
+kill then lands mid-save.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def main(argv: list[str]) -> None:
         write_digest = checkpoint._write_digest
 
         def holding(step_dir: Path) -> None:
-            if step_dir.name == hold and step_dir.parent.name == "checkpoints":
+            if f"{step_dir.parent.name}/{step_dir.name}" == hold:
                 print(f"holding {hold}", flush=True)
                 time.sleep(600)
             write_digest(step_dir)

@@ -621,7 +621,13 @@ def _truncate_newest_state(run_dir: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "fault", ["killed mid-epoch", "killed mid-save", "newest checkpoint damaged"]
+    "fault",
+    [
+        "killed mid-epoch",
+        "killed mid-save",
+        "killed saving the best policy",
+        "newest checkpoint damaged",
+    ],
 )
 def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, uninterrupted, fault):
     run_dir = tmp_path / "run"
@@ -629,7 +635,10 @@ def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, unin
         _kill_at(_worker(run_dir, 4), "epoch    3/")
         possible_starts = {2, 3}
     elif fault == "killed mid-save":  # Orbax has written step 3, its digest not yet
-        _kill_at(_worker(run_dir, 4, "--hold-before-digest", "3"), "holding 3")
+        _kill_at(_worker(run_dir, 4, "--hold-before-digest", "checkpoints/3"), "holding")
+        possible_starts = {2}
+    elif fault == "killed saving the best policy":
+        _kill_at(_worker(run_dir, 4, "--hold-before-digest", "best/2"), "holding")
         possible_starts = {2}
     else:
         training.run(
@@ -656,6 +665,7 @@ def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, unin
     np.testing.assert_array_equal(uninterrupted["buffer"].data.obs, after["buffer"].data.obs)
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert [r.split(",")[0] for r in rows[1:]] == ["1.0", "2.0", "3.0", "4.0"]
+    assert checkpoint.latest_step(run_dir / "best") in (2, 4)  # an intact best policy
 
 
 @pytest.mark.slow
