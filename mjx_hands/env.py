@@ -46,11 +46,12 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from brax.envs.base import Env, State
+from brax.envs.base import Env, State, Wrapper
 from flax import struct
 
 from mjx_hands import ik, mocap, physics, reward_params, rewards, scene, spatial, tasks
 from mjx_hands import shadow_hand as sh
+from mjx_hands.contract import InteractionEnv
 
 TASKS = tasks.TASKS
 
@@ -263,7 +264,10 @@ class HandInteractionEnv(Env):
         hand_qadr = [m.joint(name(j)).qposadr[0] for j in sh.HAND_JOINTS]
         self.actuated_qadr = np.array(arm_qadr + hand_qadr)
         self.hand_qadr = np.array(hand_qadr)
-        self.ctrl_lo, self.ctrl_hi = m.actuator_ctrlrange[:, 0].copy(), m.actuator_ctrlrange[:, 1].copy()
+        self.ctrl_lo, self.ctrl_hi = (
+            m.actuator_ctrlrange[:, 0].copy(),
+            m.actuator_ctrlrange[:, 1].copy(),
+        )
         self.jnt_lo, self.jnt_hi = m.jnt_range[:, 0].copy(), m.jnt_range[:, 1].copy()
         self.chain = ik.make_chain(m, scene.AGENT + "palm_center")
         # Contact sensor of each geom (-1: none), as the scene's sensors define them.
@@ -317,6 +321,14 @@ class HandInteractionEnv(Env):
     def backend(self) -> str:
         return self.physics.name
 
+    def describe(self) -> str:
+        source = self.demos[0].source if self.demos else "no"
+        return f"{len(self.demos)} demonstrations ({source}), {self.backend} physics"
+
+    def pose(self, pipeline_state) -> dict[str, jax.Array]:
+        """qpos (nq,), mocap_pos (nmocap, 3), mocap_quat (nmocap, 4): what renders a state."""
+        return {k: getattr(pipeline_state, k) for k in ("qpos", "mocap_pos", "mocap_quat")}
+
     def reset(self, rng: jax.Array) -> State:
         """Start an episode with the paper's randomisation. rng: (2,) key."""
         # Full float32 for the start pose's IK and forward kinematics too (see physics).
@@ -333,9 +345,7 @@ class HandInteractionEnv(Env):
         frame = jax.random.randint(k_frame, (), start, jnp.maximum(t_min, start) + 1)
 
         box = jnp.asarray(self.config.target_box)
-        target_pos = self.target_center + jax.random.uniform(
-            k_box, (3,), minval=-box, maxval=box
-        )
+        target_pos = self.target_center + jax.random.uniform(k_box, (3,), minval=-box, maxval=box)
         tilt = target_tilt(
             k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
         )
@@ -566,9 +576,9 @@ class HandInteractionEnv(Env):
 
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
         relative_points = f["points"] - episode.target_pos
-        phase = jnp.stack(
-            [episode.step / self.episode_length, f["imitation_active"]]
-        ).astype(jnp.float32)
+        phase = jnp.stack([episode.step / self.episode_length, f["imitation_active"]]).astype(
+            jnp.float32
+        )
         return jnp.concatenate(
             [
                 f["qpos"],
@@ -589,8 +599,9 @@ def _rot_to_quat(rot: np.ndarray) -> np.ndarray:
     return quat
 
 
-class BatchedEnv(Env):
-    """A batch of environments with automatic restarts.
+class BatchedEnv(Wrapper):
+    """A batch of environments with automatic restarts (a Brax ``Wrapper`` of any
+    :class:`mjx_hands.contract.InteractionEnv`; other attributes pass through).
 
     ``reset`` takes one key and returns a batched ``State``; ``step`` takes and
     returns batched states. An environment whose episode ended starts a new one with
@@ -607,25 +618,9 @@ class BatchedEnv(Env):
     restarts: what a trainer put there holds for the environment's whole life.
     """
 
-    def __init__(self, env: HandInteractionEnv, num_envs: int):
-        self.env = env
+    def __init__(self, env: InteractionEnv, num_envs: int):
+        super().__init__(env)
         self.num_envs = num_envs
-
-    @property
-    def observation_size(self) -> int:
-        return self.env.observation_size
-
-    @property
-    def action_size(self) -> int:
-        return self.env.action_size
-
-    @property
-    def backend(self) -> str:
-        return self.env.backend
-
-    @property
-    def unwrapped(self) -> HandInteractionEnv:
-        return self.env
 
     def reset(self, rng: jax.Array) -> State:
         """rng: (2,) -> State with leading axis num_envs."""
@@ -696,7 +691,9 @@ def _main() -> None:
     parser.add_argument("--task", default="handshake", choices=TASKS)
     parser.add_argument("--num-envs", type=int, default=128, help="batch size")
     parser.add_argument("--steps", type=int, default=20, help="timed control steps")
-    parser.add_argument("--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic"))
+    parser.add_argument(
+        "--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic")
+    )
     parser.add_argument("--physics", default="auto", choices=("auto",) + physics.PHYSICS)
     args = parser.parse_args()
 

@@ -103,9 +103,7 @@ def restore_run(
     return algo, tree | {"epoch": int(meta["epoch"])}, config, single
 
 
-def load_policy(
-    run_dir: Path, step: int | None = None, eval_envs: int = 128, best: bool = False
-):
+def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128, best: bool = False):
     """(algo, unreplicated learner, config, single env, epoch) of a run's checkpoint."""
     algo, tree, config, single = restore_run(run_dir, step, eval_envs, best, learner_only=True)
     return algo, tree["learner"], config, single, tree["epoch"]
@@ -121,16 +119,14 @@ def rollout(single, policy, num_episodes: int, rng: jax.Array) -> dict[str, np.n
     reset = jax.jit(jax.vmap(single.reset))
     step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
     state = reset(jax.random.split(rng, num_episodes))
-    physics = hasattr(state.pipeline_state, "qpos")  # the point-reach test task has none
     sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
     has_contacts = all(k in state.metrics for k in sensors)
-    keys = ("reward", "success", "contacts", "qpos", "mocap_pos", "mocap_quat")
-    record = {key: [] for key in keys}
+    pose = jax.jit(jax.vmap(single.pose))
+    record = {key: [] for key in ("reward", "success", "contacts")}
 
     def keep_pose(data):  # host copies only: whole mjx.Data per step would pile up on device
-        if physics:
-            for key in ("qpos", "mocap_pos", "mocap_quat"):
-                record[key].append(np.asarray(getattr(data, key)))
+        for key, value in pose(data).items():
+            record.setdefault(key, []).append(np.asarray(value))
 
     keep_pose(state.pipeline_state)
     for _ in range(single.episode_length):
@@ -215,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+
     def policy(obs):
         return algo.policy(learner, obs)
 
@@ -223,8 +220,10 @@ def main(argv: list[str] | None = None) -> int:
     summary = {
         "run_dir": str(run_dir),
         "task": config.task,
-        "checkpoint": {"kind": "best" if args.best else "latest" if args.step is None else "step",
-                       "epoch": epoch},
+        "checkpoint": {
+            "kind": "best" if args.best else "latest" if args.step is None else "step",
+            "epoch": epoch,
+        },
         "episodes": args.episodes,
         "physics": single.backend,
     } | metrics

@@ -1,10 +1,9 @@
 """A small continuous-control task in pure JAX for testing learners quickly.
 
 A point in the plane moves by its action (velocity, clipped to [-1, 1] times
-``speed``) and is rewarded by minus its distance to a random goal. Same Brax ``Env``
-API and episode bookkeeping as the hand environment (``info['episode'].rng``,
-``truncation``, ``success``), so :class:`mjx_hands.env.BatchedEnv` batches it and
-the DDPG trainer runs it unchanged. With ``terminate_on_success`` an episode ends
+``speed``) and is rewarded by minus its distance to a random goal. It keeps the
+environment contract (:mod:`mjx_hands.contract`) like the hand environment, so
+:class:`mjx_hands.env.BatchedEnv` batches it and the DDPG trainer runs it unchanged. With ``terminate_on_success`` an episode ends
 (a true termination, no bootstrapping) as soon as the point is within
 ``success_radius`` of the goal.
 """
@@ -50,6 +49,15 @@ class PointReach(Env):
     @property
     def backend(self) -> str:
         return "jax"
+
+    def describe(self) -> str:
+        return "point reach (pure JAX)"
+
+    def pose(self, pipeline_state) -> dict[str, jax.Array]:
+        return {}  # nothing to render
+
+    def variant_for(self, weights):
+        raise ValueError("PointReach has no reward variants; members differ in reward")
 
     def reset(self, rng: jax.Array) -> State:
         rng, k_pos, k_goal = jax.random.split(rng, 3)

@@ -643,13 +643,8 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
         return None
     from mjx_hands import env as env_lib
 
-    variant_for = getattr(single, "variant_for", None)
-    if variant_for is None:
-        raise ValueError(
-            f"{type(single).__name__} has no reward variants; members differ in reward"
-        )
     weights = [
-        variant_for(
+        single.variant_for(
             env_lib.reward_weights(env_lib.EnvConfig(reward=c.reward, imitation=c.imitation))
         )
         for c in configs
@@ -740,15 +735,13 @@ def run_population(
     labels = labels or [str(r.path) for r in runs]
     print(f"building the {config.task} environment and learner ...", file=out, flush=True)
     algo, single = make_learner(config, env_factory=env_factory, population=configs)
-    demos = getattr(single, "demos", None)
-    source = f"{len(demos)} demonstrations ({demos[0].source})" if demos else type(single).__name__
     where = (
         runs[0].path
         if len(runs) == 1
         else f"{len(runs)} runs in {os.path.commonpath([str(r.path) for r in runs])}"
     )
     print(
-        f"{config.task}: {source}, {getattr(single, 'backend', '?')} physics, "
+        f"{config.task}: {single.describe()}, "
         f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
         f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
         f"run dir {where} ({time.perf_counter() - launched:.0f} s)",
