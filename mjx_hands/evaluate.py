@@ -96,9 +96,9 @@ def restore_run(
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
     partial = learner_only or meta.get("contents") == "policy"
     if partial:
-        like_tree = training.policy_tree(like)
+        like_tree = algo.policy_tree(like)
     else:
-        like_tree = training.checkpoint_tree(like, config.save_replay)
+        like_tree = algo.checkpoint_tree(like, config.save_replay)
     tree, meta = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial)
     return algo, tree | {"epoch": int(meta["epoch"])}, config, single
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -20,6 +21,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
@@ -27,7 +29,7 @@ import jax
 import numpy as np
 
 from mjx_hands import checkpoint, tasks
-from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState, member, stack_members
+from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 
@@ -290,58 +292,10 @@ def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
 
 
 # ----------------------------------------------------------------- run
-def checkpoint_tree(state: TrainerState, save_replay: bool, index: int = 0) -> dict[str, Any]:
-    """What a run's checkpoint holds: member ``index`` of the population, leaves with a
-    leading device axis (the learner replicated, so device 0's copy)."""
-    one = member(state, index)
-    tree = {
-        "learner": jax.tree.map(_first_device, one.learner),
-        "env_state": one.env_state,
-        "stats": one.stats,
-        "rng": one.rng,
-        "env_steps": one.env_steps,
-    }
-    if save_replay:
-        tree["buffer"] = one.buffer
-    return tree
-
-
-def policy_tree(state: TrainerState, index: int = 0) -> dict[str, Any]:
-    """What a policy needs (the learner: networks, targets, normaliser); no env or buffer."""
-    return {"learner": jax.tree.map(_first_device, member(state, index).learner)}
-
-
 def eval_rank(row: dict[str, float]) -> tuple[float, float, float]:
     """Order of evaluations for the best policy: success at the end of the episode (the
     authors' metric), then success at some step, then the return."""
     return (row["eval/success_final"], row["eval/success"], row["eval/episode_return"])
-
-
-def _first_device(x):
-    """Device 0's slice of a replicated leaf; also for abstract (eval_shape) leaves."""
-    if isinstance(x, jax.ShapeDtypeStruct):
-        return jax.ShapeDtypeStruct(x.shape[1:], x.dtype)
-    return x[0]
-
-
-def _from_checkpoint_trees(trees: list[dict[str, Any]], fresh: TrainerState, algo: DDPG):
-    """The population state of one checkpoint tree per member (see :func:`checkpoint_tree`)."""
-    n = algo.num_devices
-    members = []
-    for index, tree in enumerate(trees):
-        fresh_member = member(fresh, index)
-        members.append(
-            fresh_member.replace(
-                learner=jax.tree.map(lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"]),
-                env_state=tree["env_state"],
-                stats=tree["stats"],
-                rng=tree["rng"],
-                env_steps=tree["env_steps"],
-                buffer=tree.get("buffer", fresh_member.buffer),
-            )
-        )
-    # Laid out as the epoch's outputs: any other sharding retraces (and recompiles) the epoch.
-    return algo.to_devices(stack_members(members))
 
 
 def memory_use() -> dict[str, float]:
@@ -521,10 +475,10 @@ class RunDirectory:
             return "no checkpoint was saved yet"
         return f"the last checkpoint (epoch {self.last_saved}) is in {self.checkpoints}"
 
-    def restore(
-        self, like: TrainerState, index: int, epoch: int, num_devices: int
-    ) -> dict[str, Any]:
-        """Member ``index``'s checkpoint tree of ``epoch`` (shaped like ``like``'s)."""
+    def restore(self, algo: DDPG, like: TrainerState, index: int, epoch: int) -> dict[str, Any]:
+        """Member ``index``'s checkpoint tree of ``epoch`` (``algo``'s layout, shaped like
+        ``like``'s)."""
+        num_devices = algo.num_devices
         meta = checkpoint.read_metadata(self.checkpoints, epoch)
         saved_devices = int(meta.get("num_devices", 1))
         if saved_devices != num_devices:
@@ -536,7 +490,7 @@ class RunDirectory:
         # The checkpoint's own setting says whether it holds the replay buffer.
         saved_replay = meta["config"]["save_replay"]
         tree, _ = checkpoint.restore(
-            self.checkpoints, checkpoint_tree(like, saved_replay, index), epoch
+            self.checkpoints, algo.checkpoint_tree(like, saved_replay, index), epoch
         )
         return tree
 
@@ -570,21 +524,27 @@ class RunDirectory:
     def metadata(self, epoch: int, num_devices: int) -> dict[str, Any]:
         return {"epoch": epoch, "config": config_to_json(self.config), "num_devices": num_devices}
 
-    def save(self, state: TrainerState, index: int, epoch: int, num_devices: int) -> None:
-        tree = checkpoint_tree(state, self.config.save_replay, index)
+    def save(self, tree: dict[str, Any], epoch: int, num_devices: int) -> None:
+        """Write ``tree`` (the learner's checkpoint layout) as the checkpoint of ``epoch``."""
         checkpoint.save(self.checkpoints, epoch, tree, self.metadata(epoch, num_devices))
         self.last_saved = epoch
 
     def save_if_best(
-        self, state: TrainerState, index: int, epoch: int, row: dict[str, float], num_devices: int
+        self,
+        policy: Callable[[], dict[str, Any]],
+        epoch: int,
+        row: dict[str, float],
+        num_devices: int,
     ) -> None:
+        """Keep ``policy()`` (the learner's policy tree) in best/ when ``row`` evaluates
+        better than every earlier evaluation."""
         # DDPG's evaluations swing by tens of points (hand clap: 0.91 then 0.11 ten epochs
         # later); the latest checkpoint is for resuming, this one is the policy to use.
         if self.best is not None and eval_rank(row) <= eval_rank(self.best):
             return
         evals = {k: v for k, v in row.items() if k.startswith("eval/")}
         meta = self.metadata(epoch, num_devices) | {"contents": "policy", "eval": evals}
-        checkpoint.save(self.best_dir, epoch, policy_tree(state, index), meta, max_to_keep=1)
+        checkpoint.save(self.best_dir, epoch, policy(), meta, max_to_keep=1)
         self.best = row
 
     def close(self) -> None:
@@ -759,8 +719,8 @@ def run_population(
         for r in runs:  # ... whose newer checkpoints the resumed run will write again
             checkpoint.discard_after(r.checkpoints, start_epoch)
             checkpoint.discard_after(r.best_dir, start_epoch)
-        trees = [r.restore(state, i, start_epoch, algo.num_devices) for i, r in enumerate(runs)]
-        state = _from_checkpoint_trees(trees, state, algo)
+        trees = [r.restore(algo, state, i, start_epoch) for i, r in enumerate(runs)]
+        state = algo.from_checkpoint_trees(trees, state)
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
     for r in runs:
         r.open(start_epoch)
@@ -834,9 +794,11 @@ def run_population(
                     for i, (r, row) in enumerate(zip(runs, rows)):
                         if i in diverged:
                             continue
-                        r.save(state, i, epoch, algo.num_devices)
+                        tree = algo.checkpoint_tree(state, r.config.save_replay, i)
+                        r.save(tree, epoch, algo.num_devices)
                         if "eval/success" in row:
-                            r.save_if_best(state, i, epoch, row, algo.num_devices)
+                            policy = functools.partial(algo.policy_tree, state, i)
+                            r.save_if_best(policy, epoch, row, algo.num_devices)
                 last_save_time = time.perf_counter()
             if out_of_time:
                 stop_reason = "max_minutes"

@@ -247,7 +247,7 @@ def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once
         cfg = training.config_from_json(checkpoint.read_metadata(ckpt)["config"])
         algo, _ = training.make_learner(cfg)
         like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
-        trees.append(checkpoint.restore(ckpt, training.checkpoint_tree(like, True))[0])
+        trees.append(checkpoint.restore(ckpt, algo.checkpoint_tree(like, True))[0])
     a, b = trees
     assert int(a["learner"].updates) == int(b["learner"].updates) > 0
     for x, y in zip(jax.tree.leaves(a["learner"]), jax.tree.leaves(b["learner"])):

@@ -16,6 +16,7 @@ import os
 import signal
 import subprocess
 import sys
+import types
 import warnings
 from pathlib import Path
 
@@ -64,7 +65,7 @@ def _learner(run_dir: Path) -> dict:
     algo, _ = training.make_learner(config, env_factory=point_factory)
     state = algo.init(jax.random.PRNGKey(0))
     tree, _ = checkpoint.restore(
-        run_dir / "checkpoints", training.checkpoint_tree(state, config.save_replay)
+        run_dir / "checkpoints", algo.checkpoint_tree(state, config.save_replay)
     )
     return tree
 
@@ -155,7 +156,7 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     algo, _ = training.make_learner(
         training.config_from_json(meta["config"]), env_factory=point_factory
     )
-    like = training.policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
+    like = algo.policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
     tree, _ = checkpoint.restore(run_dir / "best", like)
     assert set(tree) == {"learner"}  # no env state, no replay buffer
     assert int(tree["learner"].updates) == best_row["train/updates"]
@@ -184,7 +185,7 @@ def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     )
     config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
     algo, _ = training.make_learner(config, env_factory=point_factory)
-    like = training.checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
+    like = algo.checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
     with pytest.raises(
         checkpoint.CheckpointError, match=r"actor_params.*float32\(32,\).*float32\(16,\)"
     ):
@@ -691,7 +692,8 @@ def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
     with pytest.raises(
         checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this process has 2"
     ):
-        training.RunDirectory(config).restore(algo.init(jax.random.PRNGKey(0)), 0, 3, num_devices=2)
+        two_devices = types.SimpleNamespace(num_devices=2, checkpoint_tree=algo.checkpoint_tree)
+        training.RunDirectory(config).restore(two_devices, algo.init(jax.random.PRNGKey(0)), 0, 3)
 
 
 @pytest.mark.slow

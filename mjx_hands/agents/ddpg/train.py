@@ -205,6 +205,13 @@ def stack_members(trees: list):
     return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs], axis=1), *trees)
 
 
+def _first_device(x):
+    """Device 0's slice of a replicated leaf; also for abstract (eval_shape) leaves."""
+    if isinstance(x, jax.ShapeDtypeStruct):
+        return jax.ShapeDtypeStruct(x.shape[1:], x.dtype)
+    return x[0]
+
+
 class DDPG:
     """DDPG on a batched Brax-API environment (see ``mjx_hands.env.BatchedEnv``), for a
     population of ``members`` independent runs trained together in one compiled epoch.
@@ -345,6 +352,54 @@ class DDPG:
         return jax.tree.map(lambda x: x.reshape((members, n) + x.shape[1:]), stepped)
 
     # ------------------------------------------------------------------ init
+    # ----------------------------------------------------------- checkpoint layout
+    def checkpoint_tree(
+        self, state: TrainerState, save_replay: bool, index: int = 0
+    ) -> dict[str, Any]:
+        """What a run's checkpoint holds: member ``index`` of the population, leaves with a
+        leading device axis (the learner replicated, so device 0's copy). Also for
+        abstract (``jax.eval_shape``) states, as the structure to restore into."""
+        one = member(state, index)
+        tree = {
+            "learner": jax.tree.map(_first_device, one.learner),
+            "env_state": one.env_state,
+            "stats": one.stats,
+            "rng": one.rng,
+            "env_steps": one.env_steps,
+        }
+        if save_replay:
+            tree["buffer"] = one.buffer
+        return tree
+
+    def policy_tree(self, state: TrainerState, index: int = 0) -> dict[str, Any]:
+        """What a policy needs (the learner: networks, targets, normaliser); no env or
+        buffer."""
+        return {"learner": jax.tree.map(_first_device, member(state, index).learner)}
+
+    def from_checkpoint_trees(
+        self, trees: list[dict[str, Any]], fresh: TrainerState
+    ) -> TrainerState:
+        """The population state of one :meth:`checkpoint_tree` per member; what a tree
+        lacks (a buffer not saved) comes from ``fresh``."""
+        n = self.num_devices
+        members = []
+        for index, tree in enumerate(trees):
+            fresh_member = member(fresh, index)
+            members.append(
+                fresh_member.replace(
+                    learner=jax.tree.map(
+                        lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"]
+                    ),
+                    env_state=tree["env_state"],
+                    stats=tree["stats"],
+                    rng=tree["rng"],
+                    env_steps=tree["env_steps"],
+                    buffer=tree.get("buffer", fresh_member.buffer),
+                )
+            )
+        # Laid out as the epoch's outputs: any other sharding retraces (and recompiles).
+        return self.to_devices(stack_members(members))
+
     def init(self, rng: jax.Array) -> TrainerState:
         """A fresh trainer state from one key per member: rng (members, 2), or (2,) for a
         population of one. Leaves get the leading axes (devices, members)."""
