@@ -84,7 +84,7 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     from brax.training.agents.sac import train as sac
 
     from mjx_hands import training
-    from mjx_hands.evaluate import rollout
+    from mjx_hands.evaluate import rollout, summarize
 
     run_dir = training.run_directory(config)
     if config.algo not in ("sac", "ppo"):
@@ -170,11 +170,7 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     policy = make_policy(params, deterministic=True)
     act = lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
     trajectory = rollout(single, act, config.eval_envs, jax.random.PRNGKey(config.seed + 1))
-    final = {
-        "eval/episode_return": float(trajectory["reward"].sum(0).mean()),
-        "eval/success": float(trajectory["success"].max(0).mean()),
-        "eval/success_final": float(trajectory["success"][-1].mean()),
-    }
+    final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()
     training.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
