@@ -352,6 +352,8 @@ def test_error_unknown_task_and_source(tmp_path):
         mocap.load_demonstrations("et", source="vicon")
     with pytest.raises(mocap.MocapError, match="synthetic_demos"):
         mocap.load_demonstrations("et", source="synthetic", path=tmp_path)
+    with pytest.raises(mocap.MocapError, match="mocap folder /nonexistent does not exist"):
+        mocap.load_demonstrations("et", path="/nonexistent")
 
 
 def test_error_validate_names_field(synthetic):

@@ -121,6 +121,8 @@ def load_demonstrations(
     check_task(task)
     if source not in SOURCES:
         raise MocapError(f"unknown mocap source {source!r}; valid sources: {', '.join(SOURCES)}")
+    if path is not None and not Path(path).is_dir():
+        raise MocapError(f"mocap folder {path} does not exist")
     if source == "auto":
         real = Path(path) if path is not None else REAL_DATA_PATH
         if (real / f"{task}_interaction_t.npy").is_file():
