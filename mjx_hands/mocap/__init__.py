@@ -13,35 +13,9 @@ Two sources produce the same :class:`Demonstration` (host-side NumPy):
 :mod:`~mjx_hands.mocap.release` (the authors' recordings) and
 :mod:`~mjx_hands.mocap.npz` (the project's files); this package re-exports their API.
 
-Frames (all right-handed):
-
-* *palm frame* of a hand: origin ``PALM_CENTER`` in ``robot0:palm``, axes of that body
-  (+z wrist->fingers, +x thumb side, -y palmar side); see ``hand_kinematics``.
-* *target palm frame*: the palm frame of the target hand. Every position and
-  orientation of a Demonstration is expressed in it, so the placement of the pair in
-  the world does not matter.
-* *capture frame*: OptiTrack world, Y up. :data:`CAPTURE_TO_SIM` turns it into a
-  simulator world with Z up (only relative quantities leave this module, so this
-  choice cancels; it is kept so that intermediate world-frame arrays are Z-up).
-* *mocap palm frame*: the OptiTrack rigid body on the back of each hand. It is not the
-  Shadow palm frame; :class:`PalmCalibration` maps one to the other (fitted to the data
-  by :func:`estimate_palm_calibration`).
-
-What the release's arrays hold, as verified against the data (README.md of the
-release differs in two places; see ``mocap_data/README.md``):
-
-* ``<task>_distance_array_palms.npy`` (T,1,1,3): target palm - actor palm (mocap
-  origins), capture frame.
-* ``<task>_distance_array_palms_1.npy`` (T,1,6,3): target palm, then the 5 *target*
-  fingertips (th, ff, mf, rf, lf), each minus the actor palm. The fingertip geometry
-  moves rigidly with ``rot_human``'s palm, not with ``rot_robot``'s.
-* ``<task>_rot_{human,robot}.npy``: unit quaternions x, y, z, w rotating mocap-body
-  coordinates into the capture frame; bodies palm, th, ff, mf, rf, lf.
-* ``<task>_joint_angles_*.npy`` have fewer rows than the capture arrays; they are
-  aligned to the *end* of the take (row ``i`` is frame ``i + T - T_joints``), which the
-  finger-body quaternions confirm (their rotation rates correlate with the joint
-  rates at exactly that lag). ``T - T_joints`` is fixed per task
-  (:data:`RELEASE_JOINT_OFFSET`) and checked.
+Frames, and what the release's arrays hold as verified against the data: see
+:mod:`~mjx_hands.mocap.release`. Every position and orientation of a Demonstration is
+in the target hand's palm frame.
 
 Every array read is checked for damage, dtype and shape, and every frame used for
 plausibility (:data:`POSITION_BOUND`, :data:`JOINT_ANGLE_BOUND`,
