@@ -198,7 +198,11 @@ def resolve_step(directory: Path, step: int | None = None) -> int:
 
 def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
     """The JSON record of checkpoint ``step`` (default: the newest intact one)."""
-    step = resolve_step(directory, step)
+    return _read_record(directory, resolve_step(directory, step))
+
+
+def _read_record(directory: Path, step: int) -> dict[str, Any]:
+    """The JSON record of a step already verified (hashing a step reads all its bytes)."""
     try:
         with _manager(directory) as manager:
             restored = manager.restore(
@@ -223,7 +227,7 @@ def restore(
     Returns the restored state (host numpy leaves) and the metadata.
     """
     step = resolve_step(directory, step)
-    metadata = read_metadata(directory, step)
+    metadata = _read_record(directory, step)
     with_path, treedef = jax.tree_util.tree_flatten_with_path(like)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]
     leaves = [
