@@ -6,6 +6,7 @@
 
 import contextlib
 import io
+import os
 import sys
 
 from mjx_hands import xla_flags
@@ -26,6 +27,10 @@ def _import_mjx_quietly() -> None:
             print(line, file=sys.stdout)
 
 
+# MuJoCo picks its OpenGL platform when it is imported: without a display, render offscreen
+# with EGL (videos of evaluate and the rating study) unless the user chose otherwise.
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
 _import_mjx_quietly()
 
 from mjx_hands.tasks import TASKS

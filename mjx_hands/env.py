@@ -119,6 +119,37 @@ def target_tilt(rng: jax.Array, noise: float, angle: float | None = None) -> jax
     return spatial.axis_angle_quat(axis, jnp.asarray(angle, jnp.float32))
 
 
+def yaw_pitch_quat(yaw: jax.Array, pitch: jax.Array) -> jax.Array:
+    """Quaternion (4,) of a turn by ``pitch`` radians about the world y axis, then by ``yaw``
+    about the world z axis (vertical): R = R_z(yaw) R_y(pitch). The agent's shoulder is
+    at the origin and faces +x, so yaw turns the target hand left/right as the agent
+    sees it and pitch tips it up/down."""
+    z = jnp.array([0.0, 0.0, 1.0])
+    y = jnp.array([0.0, 1.0, 0.0])
+    return spatial.quat_mul(
+        spatial.axis_angle_quat(z, jnp.asarray(yaw, jnp.float32)),
+        spatial.axis_angle_quat(y, jnp.asarray(pitch, jnp.float32)),
+    )
+
+
+def random_direction(rng: jax.Array) -> jax.Array:
+    """A unit vector (3,) uniformly distributed on the sphere."""
+    v = jax.random.normal(rng, (3,))
+    return v / jnp.maximum(jnp.linalg.norm(v), 1e-9)
+
+
+def reflect_into_box(
+    position: jax.Array, velocity: jax.Array, center: jax.Array, half: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """``position`` (3,) folded back into the box ``center`` ± ``half`` (3,) by mirroring at
+    the walls it crossed, and ``velocity`` (3,) with those components reversed (a bounce:
+    the speed stays). Assumes one step crosses a wall at most once (step < box)."""
+    low, high = center - half, center + half
+    below, above = position < low, position > high
+    position = jnp.where(below, 2 * low - position, jnp.where(above, 2 * high - position, position))
+    return position, jnp.where(below | above, -velocity, velocity)
+
+
 def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
     """The reward knobs ``config`` asks for: its ``weights``, or its variant and imitation."""
     if config.weights is not None:
@@ -169,7 +200,18 @@ class EnvConfig:
     paper's robustness experiments perturb it)."""
     target_rotation_angle: float | None = None
     """If set, every episode's target hand is turned by exactly this angle (radians)
-    about a uniformly random axis instead (robustness sweeps, ``mjx_hands.robustness``)."""
+    about a uniformly random axis instead."""
+    target_speed: float | None = None
+    """None: the target hand stays where reset put it (the paper's training). A number
+    (m/s): it moves at this speed in a uniformly random direction, drawn anew every
+    ``target_turn_period`` seconds and mirrored at the walls of ``target_motion_box``;
+    goals and imitation references move with it (the paper's moving-target test,
+    ``mjx_hands.robustness``). ``reset_with`` can set the speed per episode."""
+    target_turn_period: float = 0.5
+    """Seconds between the moving target's changes of direction."""
+    target_motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    """Half-extent (metres) of the box around the nominal target palm position that the
+    moving target stays in (within the arm's reach)."""
     start_offset_steps: int = 5
     """t_off: the latest start step is t_min - t_off (control steps)."""
     start_position_noise: float = 0.02
@@ -219,6 +261,8 @@ class EpisodeInfo:
     target_points: jax.Array  # (6, 3) target palm centre + fingertips, world
     target_frames: jax.Array  # (6, 3, 3) target palm + distal bodies, body-to-world
     goal_points: jax.Array  # (6, 3) goal palm + fingertips, world
+    # (3,) m/s of the moving target (``EnvConfig.target_speed``); None: a static target.
+    target_velocity: jax.Array | None = None
 
 
 class HandInteractionEnv(Env):
@@ -228,6 +272,7 @@ class HandInteractionEnv(Env):
         task = tasks.spec(config.task)
         self.config = config
         self.episode_length = config.episode_length or task.episode_length
+        _check_motion(config)
         self.mj_model = scene.build_model(config.scene)
         self.n_substeps = round(config.control_dt / config.scene.timestep)
         if abs(self.n_substeps * config.scene.timestep - config.control_dt) > 1e-9:
@@ -331,11 +376,33 @@ class HandInteractionEnv(Env):
 
     def reset(self, rng: jax.Array) -> State:
         """Start an episode with the paper's randomisation. rng: (2,) key."""
+        return self.reset_with(rng)
+
+    def reset_with(
+        self, rng: jax.Array, tilt: jax.Array | None = None, speed: jax.Array | None = None
+    ) -> State:
+        """:meth:`reset` with the target's orientation and speed given as data (robustness
+        sweeps vmap one compiled reset over a grid of them).
+
+        Args:
+          rng: (2,) key of everything else (demonstration, position, start, ...).
+          tilt: (4,) quaternion turning the target hand from its nominal orientation about
+            its palm centre (see :func:`yaw_pitch_quat`); None draws the configured tilt.
+          speed: () m/s of the moving target; needs ``target_speed`` set (not None).
+        """
+        if speed is not None and self.config.target_speed is None:
+            raise ValueError(
+                "reset_with(speed=...) needs a moving target: build the env with "
+                "target_speed set (e.g. 0.0)"
+            )
         # Full float32 for the start pose's IK and forward kinematics too (see physics).
         with jax.default_matmul_precision("highest"):
-            return self._reset(rng)
+            return self._reset(rng, tilt, speed)
 
-    def _reset(self, rng: jax.Array) -> State:
+    def _reset(self, rng: jax.Array, tilt: jax.Array | None, speed: jax.Array | None) -> State:
+        # Keys of the moving target come from the reset's key, folded: the draws below
+        # stay those of a static target's episode.
+        k_motion = jax.random.fold_in(rng, 1)
         rng, k_demo, k_start, k_frame, k_box, k_pos, k_joint, k_rot = jax.random.split(rng, 8)
         p = self.params
         demo = jax.random.randint(k_demo, (), 0, p.t_min_step.shape[0])
@@ -346,9 +413,10 @@ class HandInteractionEnv(Env):
 
         box = jnp.asarray(self.config.target_box)
         target_pos = self.target_center + jax.random.uniform(k_box, (3,), minval=-box, maxval=box)
-        tilt = target_tilt(
-            k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
-        )
+        if tilt is None:
+            tilt = target_tilt(
+                k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
+            )
         target_quat = spatial.quat_mul(tilt, self.target_quat)
         target_rot = spatial.quat_to_mat(tilt) @ self.target_rot
         to_world = lambda x: target_pos + x @ target_rot.T
@@ -391,6 +459,11 @@ class HandInteractionEnv(Env):
             target_frames=target_frames,
             goal_points=goal_points,
         )
+        if self.config.target_speed is not None:
+            speed = self.config.target_speed if speed is None else speed
+            episode = episode.replace(
+                target_velocity=jnp.asarray(speed, jnp.float32) * random_direction(k_motion)
+            )
         features = self._features(self.physics.readings(data), episode)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
@@ -499,9 +572,11 @@ class HandInteractionEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)
-        data = self.physics.step(state.pipeline_state, self.ctrl_for(action))
+        data, episode = state.pipeline_state, state.info["episode"]
+        if episode.target_velocity is not None:
+            data, episode = self._move_target(data, episode)
+        data = self.physics.step(data, self.ctrl_for(action))
         readings = self.physics.readings(data)
-        episode = state.info["episode"]
         episode = episode.replace(step=episode.step + 1)
         features = self._features(readings, episode)
 
@@ -556,6 +631,44 @@ class HandInteractionEnv(Env):
             pipeline_state=data, obs=obs, reward=reward, done=done, metrics=metrics, info=info
         )
 
+    def _move_target(self, data, episode: EpisodeInfo) -> tuple[Any, EpisodeInfo]:
+        """The moving target one control period on (before the physics step of the period):
+        its mocap links, palm, points and goals shifted alike (the imitation reference is
+        computed from them). It turns to a fresh random direction whenever the time after
+        the step, (step + 1)·dt, enters a new ``target_turn_period``."""
+        cfg = self.config
+        per_turn = cfg.target_turn_period / cfg.control_dt  # control steps per direction
+        now = episode.step.astype(jnp.float32)
+        turns = jnp.floor((now + 1) / per_turn + 1e-4) > jnp.floor(now / per_turn + 1e-4)
+        velocity = episode.target_velocity
+        fresh = jnp.linalg.norm(velocity) * random_direction(
+            jax.random.fold_in(jax.random.fold_in(episode.rng, 2), episode.step)
+        )
+        velocity = jnp.where(turns, fresh, velocity)
+        position, velocity = reflect_into_box(
+            episode.target_pos + velocity * cfg.control_dt,
+            velocity,
+            self.target_center,
+            jnp.asarray(cfg.target_motion_box, jnp.float32),
+        )
+        shift = position - episode.target_pos
+        mocap_pos = data.mocap_pos.at[self.target_mocap].add(shift)
+        episode = episode.replace(
+            target_pos=position,
+            target_points=episode.target_points + shift,
+            goal_points=episode.goal_points + shift,
+            target_velocity=velocity,
+        )
+        return data.replace(mocap_pos=mocap_pos), episode
+
+    def points_in_target_frame(self, state: State) -> jax.Array:
+        """The agent's palm centre and fingertips (6, 3) in the target palm's frame (its
+        centre the origin, its axes those of the target palm), where the demonstrations'
+        actor trajectories are: the naturalness metrics compare the two there."""
+        episode = state.info["episode"]
+        points = self.physics.readings(state.pipeline_state).points
+        return (points - episode.target_pos) @ episode.target_rot
+
     # --------------------------------------------------------------- features
     def _features(self, readings: physics.Readings, episode: EpisodeInfo) -> dict[str, jax.Array]:
         """Everything the reward and the observation read from the simulation."""
@@ -591,6 +704,21 @@ class HandInteractionEnv(Env):
                 phase,
             ]
         )
+
+
+def _check_motion(config: EnvConfig) -> None:
+    """Raise ValueError for a moving target that cannot be simulated as configured."""
+    if config.target_speed is None:
+        return
+    problems = []
+    if not (np.isfinite(config.target_speed) and config.target_speed >= 0):
+        problems.append(f"target_speed {config.target_speed} must be >= 0 m/s (None: static)")
+    if not (np.isfinite(config.target_turn_period) and config.target_turn_period > 0):
+        problems.append(f"target_turn_period {config.target_turn_period} must be positive")
+    if not all(np.isfinite(b) and b > 0 for b in config.target_motion_box):
+        problems.append(f"target_motion_box {config.target_motion_box} must be positive metres")
+    if problems:
+        raise ValueError("EnvConfig: " + "; ".join(problems))
 
 
 def _rot_to_quat(rot: np.ndarray) -> np.ndarray:

@@ -18,8 +18,9 @@ import dataclasses
 import json
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import jax
 import numpy as np
@@ -72,7 +73,14 @@ def restore_run(
     path, so checkpoints whose environment state has another layout still load).
     ``eval_envs`` overrides the run's evaluation batch.
     """
+    if not Path(run_dir).is_dir():
+        raise FileNotFoundError(f"{run_dir}: no such run folder")
     ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
+    if not best and not ckpt_dir.is_dir():
+        raise checkpoint.CheckpointError(
+            f"{run_dir} holds no trained policy ({ckpt_dir.name}/ missing): give a folder "
+            "written by train.py (or a member of an experiment grid)"
+        )
     if best and not ckpt_dir.is_dir():
         raise checkpoint.CheckpointError(
             f"{run_dir} has no best policy ({ckpt_dir} missing): it was trained before "
@@ -109,29 +117,46 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128, be
     return algo, tree["learner"], config, single, tree["epoch"]
 
 
-def rollout(single, policy, num_episodes: int, rng: jax.Array) -> dict[str, np.ndarray]:
+def rollout(
+    single,
+    policy,
+    num_episodes: int,
+    rng: jax.Array,
+    reset: Callable[..., Any] | None = None,
+    reset_args: tuple = (),
+    extra: Callable[[Any], dict[str, jax.Array]] | None = None,
+) -> dict[str, np.ndarray]:
     """Run ``num_episodes`` whole episodes of ``single`` (no restarts) under ``policy``.
+
+    Args:
+      reset: (keys (num_episodes, 2), *reset_args) -> batched initial ``State``; default
+        ``single.reset`` vmapped. Robustness sweeps pass ``single.reset_with`` vmapped and
+        the target's tilts and speeds as ``reset_args`` (data: one compile for all).
+      extra: single ``State`` -> {name: array}, recorded at every step as ``name``
+        (T+1, n, ...) beside the rest (e.g. hand points for the naturalness metrics).
 
     Returns reward (T, n) and success (T, n), T the episode length; for the hand
     environments also contacts (T, n, 15), the sensor readings, and qpos (T+1, n, nq),
     mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering.
     """
-    reset = jax.jit(jax.vmap(single.reset))
+    reset = jax.jit(reset or jax.vmap(single.reset))
     step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
-    state = reset(jax.random.split(rng, num_episodes))
+    state = reset(jax.random.split(rng, num_episodes), *reset_args)
     sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
     has_contacts = all(k in state.metrics for k in sensors)
-    pose = jax.jit(jax.vmap(single.pose))
+    per_state = jax.jit(
+        jax.vmap(lambda s: single.pose(s.pipeline_state) | (extra(s) if extra else {}))
+    )
     record = {key: [] for key in ("reward", "success", "contacts")}
 
-    def keep_pose(data):  # host copies only: whole mjx.Data per step would pile up on device
-        for key, value in pose(data).items():
+    def keep(state):  # host copies only: whole mjx.Data per step would pile up on device
+        for key, value in per_state(state).items():
             record.setdefault(key, []).append(np.asarray(value))
 
-    keep_pose(state.pipeline_state)
+    keep(state)
     for _ in range(single.episode_length):
         state = step(state)
-        keep_pose(state.pipeline_state)
+        keep(state)
         record["reward"].append(np.asarray(state.reward))
         record["success"].append(np.asarray(state.info["success"]))
         if has_contacts:

@@ -404,6 +404,73 @@ def test_evaluate_loads_the_best_policy_without_compiling(hand_run):
         assert int(best.updates) < int(latest.updates)
 
 
+def test_robustness_sweeps_a_trained_policy_over_orientations_and_speeds(hand_run, tmp_path):
+    from mjx_hands import robustness
+
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    args = [str(run_dir), "--out", str(tmp_path), "--max-angle-deg", "30"]
+    args += ["--angle-step-deg", "30", "--speeds", "0", "0.2", "--episodes", "2", "--chunk", "18"]
+    assert robustness.main(args) == 0
+    turned = json.loads((tmp_path / "robustness_orientation.json").read_text())
+    moving = json.loads((tmp_path / "robustness_motion.json").read_text())
+    assert turned["angles_deg"] == [-30.0, 0.0, 30.0] and turned["task"] == "handshake"
+    grid = np.asarray(turned["success_final"])
+    assert grid.shape == (3, 3) and np.all((grid >= 0) & (grid <= 1))
+    assert np.asarray(moving["success"]).shape == (2,) and moving["speeds"] == [0.0, 0.2]
+    # The untilted cell and the target at speed 0 run the very same episodes.
+    for key in ("success", "success_final"):
+        assert turned[key][1][1] == moving[key][0]
+    for name in ("robustness_orientation.png", "robustness_motion.png"):
+        assert (tmp_path / name).stat().st_size > 5000
+
+
+def test_study_make_renders_blind_pairs_from_identical_starts(hand_run, tmp_path):
+    import imageio.v2 as imageio
+
+    from mjx_hands.study import layout, make
+
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    out = tmp_path / "study"
+    args = ["--out", str(out), "--runs", str(run_dir), str(run_dir), "--pairs-per-task", "1"]
+    args += ["--non-smooth-per-task", "1", "--width", "160", "--height", "128"]
+    made = subprocess.run(
+        [sys.executable, "-m", "mjx_hands.study", "make", *args],
+        cwd=ROOT,
+        capture_output=True,
+        check=False,
+        text=True,
+        timeout=900,
+    )
+    assert made.returncode == 0, made.stdout[-2000:] + made.stderr[-4000:]
+    study = layout.read_study(out)
+    assert sorted(p.kind for p in study.pairs) == ["non_smooth", "regular"]
+    assert {p.task for p in study.pairs} == {"handshake"}
+    assert set(study.key) == {p.id for p in study.pairs}
+    assert {e.left for e in study.key.values()} <= set(layout.POLICIES)
+    for pair in study.pairs:
+        first = [imageio.get_reader(out / v).get_data(0) for v in (pair.left, pair.right)]
+        np.testing.assert_array_equal(first[0], first[1])  # the same start on both sides
+        assert "imitation" not in pair.left + pair.right  # names give nothing away
+    assert make.main(args) == 2  # the study exists: refused, nothing overwritten
+
+
+def test_naturalness_measures_a_trained_policy(hand_run, tmp_path):
+    from mjx_hands import naturalness
+
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    assert naturalness.main([str(run_dir), "--out", str(tmp_path), "--episodes", "3"]) == 0
+    record = json.loads((tmp_path / "naturalness.json").read_text())
+    (policy,) = record["policies"]
+    assert policy["task"] == "handshake" and policy["epoch"] == 2
+    # Hands start on a demonstration, 2 cm of noise: the untrained policy stays within 30 cm.
+    assert 0.0 < policy["dtw"] < 0.3 and policy["jerk"] > 0 and policy["demo_jerk"] > 0
+    assert 0.0 < policy["final_pose_error"] < 0.5
+    assert "| handshake |" in (tmp_path / "naturalness.md").read_text()
+
+
 @pytest.mark.parametrize(
     "args, message",
     [

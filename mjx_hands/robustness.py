@@ -1,0 +1,344 @@
+"""Robustness of trained policies to what training did not randomise: the target hand's
+orientation and a target hand that moves.
+
+    python -m mjx_hands.robustness RUN_DIR [RUN_DIR ...] [--out DIR]
+        [--max-angle-deg 60 --angle-step-deg 15] [--speeds 0 0.05 0.1 0.2 0.3]
+
+The paper's two tests (its Figs. 5 and 6), for one run or for several runs of one task
+(e.g. the seeds of a grid variant: mean and standard error over them):
+
+* **orientation**: the target hand turned about its palm centre by every (yaw, pitch) of
+  a grid (``env.yaw_pitch_quat``: yaw about the vertical, pitch about the horizontal
+  axis across the agent's reach) -> ``robustness_orientation.json`` / ``.png``, a
+  heatmap of success at the end of the episode and at some step;
+* **motion**: the target hand moving at a constant speed in a random direction drawn
+  anew every ``--turn-period`` seconds, inside a box around its nominal position
+  (``EnvConfig.target_speed``); goals and imitation references move with it ->
+  ``robustness_motion.json`` / ``.png``, success against speed.
+
+Every cell (and speed) sees the same episodes: episode k of each uses the same key
+(demonstration, target position, start pose), so cells differ only in the target's
+orientation or speed. Orientations and speeds are data of one compiled reset: a whole
+sweep compiles once per run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Annotated, Literal
+
+import jax
+import numpy as np
+import tyro
+
+from mjx_hands import checkpoint, evaluate
+from mjx_hands import env as env_lib
+
+ORIENTATION_FILE = "robustness_orientation"
+MOTION_FILE = "robustness_motion"
+
+
+@dataclasses.dataclass(frozen=True)
+class RobustnessArgs:
+    """Success of trained policies as the target hand is turned or moves."""
+
+    run_dirs: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
+    """Folders written by train.py (or grid members), all of one task."""
+    sweep: Literal["both", "orientation", "motion"] = "both"
+    """Which test to run."""
+    out: str | None = None
+    """Output folder; default the run's folder (required with several runs)."""
+    max_angle_deg: float = 60.0
+    """Yaw and pitch run from -this to +this, degrees."""
+    angle_step_deg: float = 15.0
+    """Step of the yaw and pitch grid, degrees."""
+    speeds: tuple[float, ...] = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3)
+    """Speeds of the moving target, m/s."""
+    turn_period: float = 0.5
+    """Seconds between the moving target's changes of direction."""
+    motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    """Half-extent of the box (metres) around the nominal target position it moves in."""
+    episodes: int = 32
+    """Episodes per grid cell and per speed, per run."""
+    best: bool = False
+    """Use each run's best-evaluated policy (RUN_DIR/best) instead of the latest checkpoint."""
+    seed: int = 12345
+    """Seed of the episodes' randomisation (the same for every cell and speed)."""
+    chunk: int = 512
+    """Episodes simulated together (one compiled batch; the last one is padded)."""
+
+
+def check_args(args: RobustnessArgs) -> None:
+    """Raise ValueError naming every bad option."""
+    problems = []
+    if not args.run_dirs:
+        problems.append("give at least one RUN_DIR")
+    if len(args.run_dirs) > 1 and args.out is None:
+        problems.append("several runs need --out DIR for the combined results")
+    if not (math.isfinite(args.max_angle_deg) and 0 <= args.max_angle_deg <= 180):
+        problems.append(f"--max-angle-deg {args.max_angle_deg} must lie in [0, 180]")
+    if not (math.isfinite(args.angle_step_deg) and args.angle_step_deg > 0):
+        problems.append(f"--angle-step-deg {args.angle_step_deg} must be positive")
+    if not args.speeds or not all(math.isfinite(s) and s >= 0 for s in args.speeds):
+        problems.append(f"--speeds {list(args.speeds)} must be one or more speeds >= 0 (m/s)")
+    if not (math.isfinite(args.turn_period) and args.turn_period > 0):
+        problems.append(f"--turn-period {args.turn_period} must be positive (seconds)")
+    if not all(math.isfinite(b) and b > 0 for b in args.motion_box):
+        problems.append(f"--motion-box {list(args.motion_box)} must be three positive metres")
+    for name in ("episodes", "chunk"):
+        if getattr(args, name) < 1:
+            problems.append(f"--{name} {getattr(args, name)} must be positive")
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
+def angle_grid(max_angle_deg: float, step_deg: float) -> np.ndarray:
+    """Angles (n,) in degrees from -max to +max in steps of ``step_deg`` (0 included when
+    the step divides max)."""
+    n = math.floor(max_angle_deg / step_deg + 1e-9)
+    return step_deg * np.arange(-n, n + 1, dtype=np.float64)
+
+
+def run_episodes(
+    env: env_lib.HandInteractionEnv,
+    policy,
+    tilts: np.ndarray,
+    speeds: np.ndarray | None,
+    episodes: int,
+    seed: int,
+    chunk: int,
+) -> dict[str, np.ndarray]:
+    """Success of ``episodes`` episodes per condition.
+
+    Args:
+      env: the run's environment; with ``speeds``, one built with ``target_speed`` set.
+      tilts: (C, 4) quaternions of the target's turn per condition.
+      speeds: (C,) m/s per condition, or None for a static target.
+    Returns:
+      ``success_final`` and ``success`` (C, episodes): all required contacts at the last
+      step / at some step.
+    """
+    conditions = tilts.shape[0]
+    keys = jax.random.split(jax.random.PRNGKey(seed), episodes)  # the same for every condition
+    flat_keys = np.tile(np.asarray(keys), (conditions, 1))
+    flat_tilts = np.repeat(np.asarray(tilts, np.float32), episodes, axis=0)
+    flat_speeds = np.repeat(
+        np.zeros(conditions, np.float32) if speeds is None else np.asarray(speeds, np.float32),
+        episodes,
+    )
+    total = conditions * episodes
+    size = min(chunk, total)
+    pad = (-total) % size
+    pad_rows = lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]) if pad else x
+    flat_keys, flat_tilts, flat_speeds = map(pad_rows, (flat_keys, flat_tilts, flat_speeds))
+
+    if speeds is None:
+        reset = jax.vmap(lambda _, key, tilt, speed: env.reset_with(key, tilt))
+    else:
+        reset = jax.vmap(lambda _, key, tilt, speed: env.reset_with(key, tilt, speed))
+    final, reached = [], []
+    for start in range(0, total + pad, size):
+        part = slice(start, start + size)
+        trajectory = evaluate.rollout(
+            env,
+            policy,
+            size,
+            jax.random.PRNGKey(0),  # unused: the keys come in reset_args
+            reset=reset,
+            reset_args=(flat_keys[part], flat_tilts[part], flat_speeds[part]),
+        )
+        success = trajectory["success"] > 0.5  # (T, size)
+        final.append(success[-1])
+        reached.append(success.any(0))
+    shape = (conditions, episodes)
+    return {
+        "success_final": np.concatenate(final)[:total].reshape(shape).astype(np.float64),
+        "success": np.concatenate(reached)[:total].reshape(shape).astype(np.float64),
+    }
+
+
+def orientation_sweep(env, policy, args: RobustnessArgs, log=sys.stdout) -> dict:
+    """Success per (pitch, yaw) cell of one policy: arrays (n_pitch, n_yaw)."""
+    angles = angle_grid(args.max_angle_deg, args.angle_step_deg)
+    yaw, pitch = np.meshgrid(np.radians(angles), np.radians(angles))  # rows: pitch
+    tilts = np.asarray(jax.vmap(env_lib.yaw_pitch_quat)(yaw.ravel(), pitch.ravel()))
+    print(
+        f"  orientation: {angles.size} x {angles.size} cells x {args.episodes} episodes",
+        file=log,
+        flush=True,
+    )
+    result = run_episodes(env, policy, tilts, None, args.episodes, args.seed, args.chunk)
+    shape = (angles.size, angles.size)
+    return {k: v.mean(axis=1).reshape(shape) for k, v in result.items()}
+
+
+def motion_sweep(env, policy, args: RobustnessArgs, log=sys.stdout) -> dict:
+    """Success per speed of one policy: arrays (n_speeds,)."""
+    moving = env_lib.HandInteractionEnv(
+        dataclasses.replace(
+            env.config,
+            target_speed=0.0,
+            target_turn_period=args.turn_period,
+            target_motion_box=tuple(args.motion_box),
+        )
+    )
+    speeds = np.asarray(args.speeds, np.float64)
+    identity = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (speeds.size, 1))
+    print(f"  motion: {speeds.size} speeds x {args.episodes} episodes", file=log, flush=True)
+    result = run_episodes(moving, policy, identity, speeds, args.episodes, args.seed, args.chunk)
+    return {k: v.mean(axis=1) for k, v in result.items()}
+
+
+def combine(per_run: list[dict], episodes: int) -> dict:
+    """Mean and standard error of each array: {key: list, key_se: list, key_per_run}. The
+    error is over runs; for one run, the binomial error over its ``episodes``."""
+    out = {}
+    for key in per_run[0]:
+        stack = np.stack([r[key] for r in per_run])
+        mean = stack.mean(axis=0)
+        if len(per_run) > 1:
+            se = stack.std(axis=0, ddof=1) / math.sqrt(len(per_run))
+        else:
+            se = np.sqrt(mean * (1 - mean) / episodes)
+        out[key] = mean.tolist()
+        out[f"{key}_se"] = se.tolist()
+        out[f"{key}_per_run"] = stack.tolist()
+    return out
+
+
+def plot_orientation(summary: dict, path: Path) -> None:
+    """Two heatmaps (success at the end, at some step) over yaw x pitch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    angles = np.asarray(summary["angles_deg"])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), constrained_layout=True)
+    for ax, key, title in zip(
+        axes, ("success_final", "success"), ("success at the end", "success at some step")
+    ):
+        values = np.asarray(summary[key])
+        image = ax.imshow(values, origin="lower", vmin=0, vmax=1, cmap="viridis")
+        ax.set_xticks(range(angles.size), [f"{a:g}" for a in angles])
+        ax.set_yticks(range(angles.size), [f"{a:g}" for a in angles])
+        ax.set_xlabel("yaw of the target hand (degrees)")
+        ax.set_ylabel("pitch of the target hand (degrees)")
+        ax.set_title(title)
+        for (i, j), v in np.ndenumerate(values):
+            ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7,
+                    color="white" if v < 0.5 else "black")  # fmt: skip
+    fig.colorbar(image, ax=axes, shrink=0.8, label="success rate")
+    fig.suptitle(
+        f"{summary['task']}: target hand turned ({summary['runs']} run(s), "
+        f"{summary['episodes']} episodes per cell each)"
+    )
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_motion(summary: dict, path: Path) -> None:
+    """Success (at the end, at some step) against the target's speed, ± SE over runs."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    speeds = np.asarray(summary["speeds"])
+    fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+    for key, style, label in (
+        ("success_final", "s-", "success at the end"),
+        ("success", "o--", "success at some step"),
+    ):
+        ax.errorbar(speeds, summary[key], yerr=summary[f"{key}_se"], fmt=style, capsize=3,
+                    label=label)  # fmt: skip
+    ax.set_xlabel("speed of the target hand (m/s)")
+    ax.set_ylabel("success rate")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best")
+    ax.set_title(
+        f"{summary['task']}: moving target, turns every {summary['turn_period']} s "
+        f"({summary['runs']} run(s))"
+    )
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def load_runs(args: RobustnessArgs) -> list[tuple]:
+    """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
+    loaded = []
+    for run_dir in args.run_dirs:
+        algo, learner, _config, single, epoch = evaluate.load_policy(
+            Path(run_dir), eval_envs=args.chunk, best=args.best
+        )
+        loaded.append((run_dir, lambda obs, a=algo, p=learner: a.policy(p, obs), single, epoch))
+    tasks = {single.config.task for _, _, single, _ in loaded}
+    if len(tasks) > 1:
+        raise ValueError(f"the runs are of different tasks {sorted(tasks)}; give runs of one task")
+    return loaded
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = tyro.cli(
+        RobustnessArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__
+    )
+    try:
+        check_args(args)
+        runs = load_runs(args)
+    except (checkpoint.CheckpointError, ValueError, FileNotFoundError, TypeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out or args.run_dirs[0])
+    out.mkdir(parents=True, exist_ok=True)
+    task = runs[0][2].config.task
+    common = {
+        "task": task,
+        "runs": len(runs),
+        "run_dirs": [str(r) for r in args.run_dirs],
+        "checkpoint": {"kind": "best" if args.best else "latest", "epochs": [r[3] for r in runs]},
+        "episodes": args.episodes,
+        "seed": args.seed,
+    }
+    if args.sweep in ("both", "orientation"):
+        per_run = []
+        for run_dir, policy, single, _ in runs:
+            print(f"{run_dir}:", flush=True)
+            per_run.append(orientation_sweep(single, policy, args))
+        summary = common | {"angles_deg": angle_grid(args.max_angle_deg, args.angle_step_deg)}
+        summary = summary | combine(per_run, args.episodes)
+        summary["angles_deg"] = summary["angles_deg"].tolist()
+        (out / f"{ORIENTATION_FILE}.json").write_text(json.dumps(summary, indent=1))
+        plot_orientation(summary, out / f"{ORIENTATION_FILE}.png")
+        centre = len(summary["angles_deg"]) // 2
+        print(
+            f"orientation: success at the end {np.mean(summary['success_final']):.2f} over "
+            f"the grid, {summary['success_final'][centre][centre]:.2f} at the nominal pose; "
+            f"{out / ORIENTATION_FILE}.json/.png"
+        )
+    if args.sweep in ("both", "motion"):
+        per_run = []
+        for run_dir, policy, single, _ in runs:
+            print(f"{run_dir}:", flush=True)
+            per_run.append(motion_sweep(single, policy, args))
+        summary = common | {
+            "speeds": list(args.speeds),
+            "turn_period": args.turn_period,
+            "motion_box": list(args.motion_box),
+        }
+        summary = summary | combine(per_run, args.episodes)
+        (out / f"{MOTION_FILE}.json").write_text(json.dumps(summary, indent=1))
+        plot_motion(summary, out / f"{MOTION_FILE}.png")
+        shown = ", ".join(
+            f"{s:g} m/s {v:.2f}" for s, v in zip(args.speeds, summary["success_final"])
+        )
+        print(f"motion: success at the end {shown}; {out / MOTION_FILE}.json/.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

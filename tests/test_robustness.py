@@ -1,0 +1,142 @@
+"""Robustness sweeps: the turned target and the moving target, against NumPy references."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from mjx_hands import env as env_lib
+from mjx_hands import robustness, scene
+
+IDENTITY = np.array([1.0, 0.0, 0.0, 0.0], np.float32)
+
+
+def rot_z(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def rot_y(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+@pytest.fixture(scope="module")
+def moving_env():
+    """A handshake env (native physics, compiles in seconds) whose target can move."""
+    env = env_lib.make_env(
+        "handshake",
+        mocap_source="synthetic",
+        physics="native",
+        target_speed=0.0,
+        target_motion_box=(0.3, 0.3, 0.3),
+    )
+    return env, jax.jit(jax.vmap(env.reset_with)), jax.jit(jax.vmap(env.step))
+
+
+def test_yaw_pitch_turns_the_target_hand_its_goals_and_its_mocap_bodies(moving_env):
+    env, reset, _ = moving_env
+    yaw, pitch = np.radians([0.0, 30.0, -45.0, 60.0]), np.radians([0.0, -20.0, 45.0, 60.0])
+    tilts = jax.vmap(env_lib.yaw_pitch_quat)(yaw, pitch)
+    key = jax.random.split(jax.random.PRNGKey(7), 1)
+    keys = jnp.repeat(key, 4, axis=0)  # the same episode, turned four ways
+    state = reset(keys, tilts, jnp.zeros(4))
+    ep = state.info["episode"]
+    nominal = np.asarray(env.target_rot)
+    pos0 = np.asarray(ep.target_pos[0])
+    goal0 = np.asarray(ep.goal_points[0]) - pos0
+    for i in range(4):
+        turn = rot_z(yaw[i]) @ rot_y(pitch[i])
+        np.testing.assert_allclose(np.asarray(ep.target_rot[i]), turn @ nominal, atol=2e-5)
+        # Turned about the palm centre: it stays, the goals turn about it.
+        np.testing.assert_allclose(np.asarray(ep.target_pos[i]), pos0, atol=1e-6)
+        goals = np.asarray(ep.goal_points[i]) - pos0
+        np.testing.assert_allclose(goals, goal0 @ turn.T, atol=2e-5)
+        # The rendered/simulated target hand is where the frame says.
+        d = mujoco.MjData(env.mj_model)
+        d.mocap_pos[:] = np.asarray(state.pipeline_state.mocap_pos[i])
+        d.mocap_quat[:] = np.asarray(state.pipeline_state.mocap_quat[i])
+        mujoco.mj_kinematics(env.mj_model, d)
+        body = env.mj_model.body(scene.TARGET + "palm").id
+        np.testing.assert_allclose(d.xmat[body].reshape(3, 3), turn @ nominal, atol=2e-5)
+    # Untilted and at speed 0, reset_with is the plain reset of the same key.
+    plain = jax.jit(env.reset)(key[0])
+    np.testing.assert_allclose(np.asarray(state.obs[0]), np.asarray(plain.obs), atol=1e-6)
+
+
+def test_moving_target_keeps_its_speed_turns_every_half_second_and_carries_the_goals(
+    moving_env,
+):
+    env, reset, step = moving_env
+    n, steps, dt = 3, 40, env.config.control_dt
+    speeds = np.array([0.0, 0.1, 0.25], np.float32)
+    state = reset(jax.random.split(jax.random.PRNGKey(1), n), jnp.tile(IDENTITY, (n, 1)), speeds)
+    record = {k: [] for k in ("pos", "goals", "points", "mocap")}
+    for t in range(steps + 1):
+        ep = state.info["episode"]
+        record["pos"].append(np.asarray(ep.target_pos))
+        record["goals"].append(np.asarray(ep.goal_points))
+        record["points"].append(np.asarray(ep.target_points))
+        record["mocap"].append(np.asarray(state.pipeline_state.mocap_pos))
+        if t < steps:
+            state = step(state, jnp.zeros((n, env.action_size)))
+    pos = np.array(record["pos"])  # (T+1, n, 3)
+    moves = np.diff(pos, axis=0)  # (T, n, 3)
+    np.testing.assert_allclose(
+        np.linalg.norm(moves, axis=-1), np.tile(speeds * dt, (steps, 1)), atol=1e-6
+    )
+    # Directions change exactly at the steps where (k + 1)·dt enters a new 0.5 s period.
+    k = np.arange(steps)
+    expected = np.floor((k + 1) * dt / 0.5 + 1e-6) > np.floor(k * dt / 0.5 + 1e-6)
+    for i in (1, 2):
+        unit = moves[:, i] / np.linalg.norm(moves[:, i], axis=-1, keepdims=True)
+        turned = np.r_[False, (unit[1:] * unit[:-1]).sum(-1) < 1 - 1e-6]
+        np.testing.assert_array_equal(turned[1:], expected[1:])
+    # Goals, target points and every mocap body of the target move with the palm.
+    for key in ("goals", "points"):
+        shifts = np.diff(np.array(record[key]), axis=0)
+        np.testing.assert_allclose(shifts, np.repeat(moves[:, :, None], 6, axis=2), atol=1e-6)
+    mocap = np.diff(np.array(record["mocap"]), axis=0)[:, :, env.target_mocap]
+    np.testing.assert_allclose(
+        mocap, np.repeat(moves[:, :, None], len(env.target_mocap), 2), atol=1e-6
+    )
+
+
+def test_moving_target_bounces_inside_its_box_at_constant_speed():
+    center, half = np.zeros(3, np.float32), np.full(3, 0.02, np.float32)
+    rng = np.random.default_rng(0)
+    position = rng.uniform(-0.02, 0.02, (200, 3)).astype(np.float32)
+    velocity = rng.normal(size=(200, 3)).astype(np.float32) * 0.3
+    step = jax.jit(jax.vmap(lambda p, v: env_lib.reflect_into_box(p + 0.04 * v, v, center, half)))
+    new_p, new_v = map(np.asarray, step(position, velocity))
+    assert np.all(np.abs(new_p) <= 0.02 + 1e-7)
+    np.testing.assert_allclose(np.linalg.norm(new_v, axis=1), np.linalg.norm(velocity, axis=1))
+    # NumPy reference: mirror each coordinate at the wall it crossed.
+    raw = position + 0.04 * velocity
+    ref = np.where(raw > 0.02, 0.04 - raw, np.where(raw < -0.02, -0.04 - raw, raw))
+    np.testing.assert_allclose(new_p, ref, atol=1e-7)
+    np.testing.assert_array_equal(np.sign(new_v) != np.sign(velocity), np.abs(raw) > 0.02)
+
+
+def test_a_static_target_has_no_motion_and_refuses_a_speed():
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    state = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
+    assert state.info["episode"].target_velocity is None
+    with pytest.raises(ValueError, match="needs a moving target"):
+        env.reset_with(jax.random.PRNGKey(0), None, jnp.float32(0.1))
+    with pytest.raises(ValueError, match="target_speed -1"):
+        env_lib.make_env("et", mocap_source="synthetic", physics="native", target_speed=-1.0)
+
+
+def test_angle_grid_and_bad_options():
+    np.testing.assert_allclose(robustness.angle_grid(60, 15), np.arange(-60, 61, 15))
+    np.testing.assert_allclose(robustness.angle_grid(50, 20), [-40, -20, 0, 20, 40])
+    np.testing.assert_allclose(robustness.angle_grid(0, 15), [0])
+    args = robustness.RobustnessArgs(run_dirs=("a", "b"), speeds=(-0.1,), angle_step_deg=0)
+    with pytest.raises(ValueError) as err:
+        robustness.check_args(args)
+    for text in ("--out DIR", "--speeds", "--angle-step-deg"):
+        assert text in str(err.value)
