@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import shutil
 import warnings
@@ -49,6 +50,16 @@ def _leaves(tree) -> tuple[list[str], list[np.ndarray], Any]:
     with_path, treedef = jax.tree_util.tree_flatten_with_path(tree)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]
     return paths, [np.asarray(x) for _, x in with_path], treedef
+
+
+def _drop_metadata_notice(record: logging.LogRecord) -> bool:
+    """Keep Orbax's notice that a registry without jax.Array skips array metadata (every
+    restore with the registry below logs it; arrays are saved as NumPy on purpose) out of
+    users' terminals; everything else it logs passes."""
+    return not record.getMessage().startswith("No jax.Array in TypeHandlerRegistry")
+
+
+logging.getLogger("absl").addFilter(_drop_metadata_notice)
 
 
 def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp.CheckpointManager:
@@ -196,9 +207,15 @@ def resolve_step(directory: Path, step: int | None = None) -> int:
     return step
 
 
-def read_metadata(directory: Path, step: int | None = None) -> dict[str, Any]:
-    """The JSON record of checkpoint ``step`` (default: the newest intact one)."""
-    return _read_record(directory, resolve_step(directory, step))
+def read_metadata(
+    directory: Path, step: int | None = None, *, verified: bool = False
+) -> dict[str, Any]:
+    """The JSON record of checkpoint ``step`` (default: the newest intact one).
+    ``verified``: ``step`` came from :func:`resolve_step`, whose digest check (which reads
+    every byte of the step) need not run again."""
+    if not (verified and step is not None):
+        step = resolve_step(directory, step)
+    return _read_record(directory, step)
 
 
 def _read_record(directory: Path, step: int) -> dict[str, Any]:
@@ -216,7 +233,7 @@ def _read_record(directory: Path, step: int) -> dict[str, Any]:
 
 
 def restore(
-    directory: Path, like, step: int | None = None, partial: bool = False
+    directory: Path, like, step: int | None = None, partial: bool = False, *, verified: bool = False
 ) -> tuple[Any, dict[str, Any]]:
     """Load checkpoint ``step`` (default: latest) into the structure of ``like``.
 
@@ -224,9 +241,11 @@ def restore(
     checkpoint must have the same leaves with the same shapes and dtypes. With
     ``partial``, ``like`` may be a part of what was saved (e.g. only the learner of a
     whole training state): its leaves are found by path.
+    ``verified``: as in :func:`read_metadata`.
     Returns the restored state (host numpy leaves) and the metadata.
     """
-    step = resolve_step(directory, step)
+    if not (verified and step is not None):
+        step = resolve_step(directory, step)
     metadata = _read_record(directory, step)
     with_path, treedef = jax.tree_util.tree_flatten_with_path(like)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]

@@ -87,7 +87,7 @@ def restore_run(
             "train.py kept one, or it never evaluated; evaluate the latest checkpoint instead"
         )
     step = checkpoint.resolve_step(ckpt_dir, step)  # the newest intact one when None
-    meta = checkpoint.read_metadata(ckpt_dir, step)
+    meta = checkpoint.read_metadata(ckpt_dir, step, verified=True)
     config = training.config_from_json(meta["config"])
     config = dataclasses.replace(config, resume=False)
     if eval_envs is not None:
@@ -107,7 +107,7 @@ def restore_run(
         like_tree = algo.policy_tree(like)
     else:
         like_tree = algo.checkpoint_tree(like, config.save_replay)
-    tree, meta = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial)
+    tree, meta = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial, verified=True)
     return algo, tree | {"epoch": int(meta["epoch"])}, config, single
 
 

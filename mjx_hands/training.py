@@ -494,7 +494,10 @@ class RunDirectory:
         # The checkpoint's own setting says whether it holds the replay buffer.
         saved_replay = meta["config"]["save_replay"]
         tree, _ = checkpoint.restore(
-            self.checkpoints, algo.checkpoint_tree(like, saved_replay, index), epoch
+            self.checkpoints,
+            algo.checkpoint_tree(like, saved_replay, index),
+            epoch,
+            verified=True,  # read_metadata above checked the step's digest
         )
         return tree
 
