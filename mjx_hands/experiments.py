@@ -114,7 +114,9 @@ def _grid_default(argv: list[str]) -> GridConfig:
     if "--resume" in argv and run_dir:
         path = Path(run_dir) / GRID_FILE
         if not path.is_file():
-            raise FileNotFoundError(f"--resume: no grid to continue in {run_dir} ({GRID_FILE} missing)")
+            raise FileNotFoundError(
+                f"--resume: no grid to continue in {run_dir} ({GRID_FILE} missing)"
+            )
         try:
             saved = json.loads(path.read_text())
             train = dataclasses.replace(training.config_from_json(saved["train"]), resume=False)
@@ -189,13 +191,21 @@ def run_main(argv: list[str]) -> int:
     except training.TrainingDiverged as err:
         print(f"error: {err}", file=sys.stderr)
         return 3
-    except (ValueError, MocapError, checkpoint.CheckpointError, FileNotFoundError, FileExistsError) as err:
+    except (
+        ValueError,
+        MocapError,
+        checkpoint.CheckpointError,
+        FileNotFoundError,
+        FileExistsError,
+    ) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     by_variant: dict[str, list[float]] = {}
     for s in summaries:
         by_variant.setdefault(s["variant"], []).append(s["final_eval"].get(HEADLINE, math.nan))
-    shown = ", ".join(f"{v} {mean_se(x)[0]:.2f} +- {mean_se(x)[1]:.2f}" for v, x in by_variant.items())
+    shown = ", ".join(
+        f"{v} {mean_se(x)[0]:.2f} +- {mean_se(x)[1]:.2f}" for v, x in by_variant.items()
+    )
     print(f"done ({summaries[0]['stop_reason']}): success at the end, mean +- SE: {shown}")
     print(f"report: python -m mjx_hands.experiments report {grid.train.run_dir}")
     return 0
@@ -264,9 +274,14 @@ def curves(grid: dict[str, Any], key: str = HEADLINE) -> dict[str, dict[str, np.
         stats = [mean_se([b[e].get(key, math.nan) for b in by_epoch]) for e in epochs]
         out[variant] = {
             "epoch": np.asarray(epochs),
-            "env_steps": np.asarray([np.mean([b[e]["train/env_steps"] for b in by_epoch]) for e in epochs]),
+            "env_steps": np.asarray(
+                [np.mean([b[e]["train/env_steps"] for b in by_epoch]) for e in epochs]
+            ),
             "wall_seconds": np.asarray(
-                [np.mean([b[e].get("time/wall_seconds", math.nan) for b in by_epoch]) for e in epochs]
+                [
+                    np.mean([b[e].get("time/wall_seconds", math.nan) for b in by_epoch])
+                    for e in epochs
+                ]
             ),
             "mean": np.asarray([s[0] for s in stats]),
             "se": np.asarray([s[1] for s in stats]),
@@ -299,7 +314,9 @@ def summarize(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "n_seeds": len(runs),
                 "seeds": [m["seed"] for m in runs],
                 "final_epoch": min(m["evals"][-1]["epoch"] for m in runs),
-                "final_env_steps": float(np.mean([m["evals"][-1]["train/env_steps"] for m in runs])),
+                "final_env_steps": float(
+                    np.mean([m["evals"][-1]["train/env_steps"] for m in runs])
+                ),
             }
             for name, key in SUMMARY_KEYS.items():
                 values = [m["evals"][-1].get(key, math.nan) for m in runs]
@@ -322,8 +339,12 @@ def _compare(summary, task, a, b, metric, better: str) -> dict[str, Any]:
     ra, rb = _lookup(summary, task, a), _lookup(summary, task, b)
     if ra is None or rb is None:
         missing = [v for v, r in ((a, ra), (b, rb)) if r is None]
-        return {"task": task, "comparison": f"{a} vs {b}", "verdict": "not tested",
-                "why": f"no {', '.join(missing)} runs of {task}"}
+        return {
+            "task": task,
+            "comparison": f"{a} vs {b}",
+            "verdict": "not tested",
+            "why": f"no {', '.join(missing)} runs of {task}",
+        }
     xa, xb = ra[f"final_{metric}_values"], rb[f"final_{metric}_values"]
     t, p = welch(xa, xb)
     diff = ra[f"final_{metric}"] - rb[f"final_{metric}"]
@@ -370,29 +391,35 @@ def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
         for task in ("handshake", "et")
         for baseline in ("baseline1", "baseline2")
     ]
-    out.append({
-        "statement": "1. The full reward beats both baselines on the handshake and E.T. "
-        "(success at the end; the full reward without imitation, as the baselines).",
-        "verdict": _combine(parts),
-        "tests": parts,
-    })
+    out.append(
+        {
+            "statement": "1. The full reward beats both baselines on the handshake and E.T. "
+            "(success at the end; the full reward without imitation, as the baselines).",
+            "verdict": _combine(parts),
+            "tests": parts,
+        }
+    )
     parts = [
         _compare(summary, task, "baseline2", "baseline1", "fingertip_goal_distance", "lower")
         for task in ("handshake", "et")
     ]
-    out.append({
-        "statement": "2. Baseline 2 ends closer to the desired final pose than Baseline 1 "
-        "(handshake, E.T.; mean fingertip-to-goal distance at the last step, metres).",
-        "verdict": _combine(parts),
-        "tests": parts,
-    })
+    out.append(
+        {
+            "statement": "2. Baseline 2 ends closer to the desired final pose than Baseline 1 "
+            "(handshake, E.T.; mean fingertip-to-goal distance at the last step, metres).",
+            "verdict": _combine(parts),
+            "tests": parts,
+        }
+    )
     clap = _lookup(summary, "handclap", "baseline1")
     if clap is None:
-        out.append({
-            "statement": "3. On the hand clap Baseline 1 reaches a high success rate.",
-            "verdict": "not tested",
-            "tests": [{"why": "no baseline1 runs of handclap"}],
-        })
+        out.append(
+            {
+                "statement": "3. On the hand clap Baseline 1 reaches a high success rate.",
+                "verdict": "not tested",
+                "tests": [{"why": "no baseline1 runs of handclap"}],
+            }
+        )
     else:
         from scipy import stats
 
@@ -408,13 +435,20 @@ def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
             verdict = "not held"
         else:
             verdict = "not significant"
-        out.append({
-            "statement": f"3. On the hand clap Baseline 1 reaches a high success rate "
-            f"(at the end; high: >= {HIGH_SUCCESS}, judged by the 95 % confidence interval).",
-            "verdict": verdict,
-            "tests": [{"task": "handclap", "baseline1": f"{mean:.3f} +- {se:.3f} (n={n})",
-                       "ci95": [low, high]}],
-        })
+        out.append(
+            {
+                "statement": f"3. On the hand clap Baseline 1 reaches a high success rate "
+                f"(at the end; high: >= {HIGH_SUCCESS}, judged by the 95 % confidence interval).",
+                "verdict": verdict,
+                "tests": [
+                    {
+                        "task": "handclap",
+                        "baseline1": f"{mean:.3f} +- {se:.3f} (n={n})",
+                        "ci95": [low, high],
+                    }
+                ],
+            }
+        )
     parts = [
         _compare(summary, task, "full", "no_imitation", "success_end", "higher")
         for task in ("handshake", "handclap", "et")
@@ -428,13 +462,15 @@ def statements(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
         verdict = "not held"
     if tested and len(tested) < len(parts):
         verdict += " (partly tested)"
-    out.append({
-        "statement": "4. Adding imitation does not significantly change success rates "
-        f"(Welch's t-test, p >= {ALPHA}, per task; with few seeds a weak test, not one of "
-        "equivalence).",
-        "verdict": verdict,
-        "tests": parts,
-    })
+    out.append(
+        {
+            "statement": "4. Adding imitation does not significantly change success rates "
+            f"(Welch's t-test, p >= {ALPHA}, per task; with few seeds a weak test, not one of "
+            "equivalence).",
+            "verdict": verdict,
+            "tests": parts,
+        }
+    )
     return out
 
 
@@ -493,8 +529,11 @@ def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
     lines = ["| statement | verdict | numbers |", "|---|---|---|"]
     for s in judged:
         numbers = "; ".join(
-            ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in t.items()
-                      if k not in ("statement",))
+            ", ".join(
+                f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                for k, v in t.items()
+                if k not in ("statement",)
+            )
             for t in s["tests"]
         )
         lines.append(f"| {s['statement']} | **{s['verdict']}** | {numbers} |")
@@ -531,21 +570,199 @@ def report_main(argv: list[str]) -> int:
     return 0
 
 
-USAGE = """usage: python -m mjx_hands.experiments {run,report} [--help] ...
+# --------------------------------------------------------------------- compare
+TARGET_SUCCESS = 0.9  # issue target: every seed ends at >= 90 % success at the end
+COLLAPSE_FROM = 0.8  # ... and loses no more than COLLAPSE_LIMIT once it first reached this
+COLLAPSE_LIMIT = 0.2
 
-  run     train seeds x reward variants of one task as one population
-  report  Fig.-4-style plot, summary table and the paper's statements from grids"""
+
+def seed_record(evals: list[dict[str, float]], first_epoch_seconds: float) -> dict[str, float]:
+    """One member's figures from its evaluation rows (in epoch order): final and best
+    success at the end, the env steps and grid wall seconds at which it first reached
+    ``TARGET_SUCCESS`` (NaN: never), and its collapse: the largest fall below its running
+    best after it first reached ``COLLAPSE_FROM`` (0 if never reached)."""
+    values = [r[HEADLINE] for r in evals]
+    reached = next((r for r in evals if r[HEADLINE] >= TARGET_SUCCESS), None)
+    collapse, peak = 0.0, None
+    for v in values:
+        if peak is None and v >= COLLAPSE_FROM:
+            peak = v
+        if peak is not None:
+            peak = max(peak, v)
+            collapse = max(collapse, peak - v)
+    return {
+        "final": values[-1],
+        "best": max(values),
+        "steps_to_target": reached["train/env_steps"] if reached else math.nan,
+        "seconds_to_target": reached.get("time/wall_seconds", math.nan) if reached else math.nan,
+        "collapse": collapse,
+        "first_epoch_seconds": first_epoch_seconds,
+    }
+
+
+def _first_epoch_seconds(grid_dir: Path, member: dict[str, Any]) -> float:
+    """Wall seconds from launch to the end of epoch 1 (building and compiles included)."""
+    rows = _read_rows(Path(grid_dir) / member["run_dir"] / "metrics.csv")
+    first = next((r for r in rows if r.get("epoch") == 1.0), None)
+    return first.get("time/wall_seconds", math.nan) if first else math.nan
+
+
+def compare_learners(labelled: list[tuple[str, Path]], variant: str) -> list[dict[str, Any]]:
+    """One row per labelled grid (its members of ``variant``): mean +- SE over seeds of the
+    :func:`seed_record` figures (``run_seconds_to_target``: the grid's wall clock over its
+    member count, what one run alone would take on the same cores), how many seeds met
+    the targets, and Welch's p of the final success against the first grid's."""
+    rows = []
+    for label, grid_dir in labelled:
+        grid = load_grid(grid_dir)
+        members = [m for m in grid["members"] if m["variant"] == variant and m["evals"]]
+        if not members:
+            raise ValueError(f"{grid_dir}: no evaluated member of variant {variant!r}")
+        seeds = [seed_record(m["evals"], _first_epoch_seconds(grid_dir, m)) for m in members]
+        for seed in seeds:  # on 2 cores SGD sets the pace: a grid costs members x one run
+            seed["run_seconds_to_target"] = seed["seconds_to_target"] / len(grid["members"])
+        row: dict[str, Any] = {"label": label, "task": grid["task"], "n_seeds": len(seeds)}
+        row["final_epoch"] = min(m["evals"][-1]["epoch"] for m in members)
+        row["final_env_steps"] = float(
+            np.mean([m["evals"][-1]["train/env_steps"] for m in members])
+        )
+        for key in seeds[0]:
+            row[key], row[f"{key}_se"] = mean_se([s[key] for s in seeds])
+            row[f"{key}_values"] = [s[key] for s in seeds]
+        row["seeds_at_target"] = sum(s["final"] >= TARGET_SUCCESS for s in seeds)
+        row["seeds_reached_target"] = sum(math.isfinite(s["steps_to_target"]) for s in seeds)
+        row["worst_collapse"] = max(s["collapse"] for s in seeds)
+        row["seeds_collapsed"] = sum(s["collapse"] > COLLAPSE_LIMIT for s in seeds)
+        row["min_final"] = min(s["final"] for s in seeds)
+        if rows:
+            row["p_final_vs_first"] = welch(row["final_values"], rows[0]["final_values"])[1]
+        rows.append(row)
+    return rows
+
+
+def plot_learners(labelled: list[tuple[str, Path]], variant: str, path: Path) -> None:
+    """Success at the end, mean +- SE over seeds, against env steps and grid wall clock."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    task = ""
+    for label, grid_dir in labelled:
+        grid = load_grid(grid_dir)
+        task = grid["task"]
+        c = curves(grid).get(variant)
+        if c is None:
+            continue
+        for ax, x in zip(axes, (c["env_steps"], c["wall_seconds"] / 60)):
+            ax.plot(x, c["mean"], label=f"{label} (n={c['n']})")
+            ax.fill_between(x, c["mean"] - c["se"], c["mean"] + c["se"], alpha=0.2)
+    axes[0].set_xlabel("environment steps per run")
+    axes[1].set_xlabel("wall clock of the grid, minutes")
+    for ax in axes:
+        ax.axhline(TARGET_SUCCESS, color="grey", lw=0.8, ls="--")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.set_ylabel("success at the end of the episode")
+        ax.legend(loc="lower right", fontsize=8)
+    fig.suptitle(f"{task}: learners compared ({variant} reward), mean +- SE over seeds")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def learners_markdown(rows: list[dict[str, Any]]) -> str:
+    """The comparison as a Markdown table."""
+
+    def pm(row, key, scale=1.0, digits=2):
+        return f"{scale * row[key]:.{digits}f} ± {scale * row[key + '_se']:.{digits}f}"
+
+    lines = [
+        "| learner | seeds | success at the end | min | seeds >= 0.9 at the end | best "
+        + "| env steps to 0.9 (seeds) | minutes to 0.9 per run | worst fall after 0.8 "
+        + "| first epoch (s) | p vs first |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        p = r.get("p_final_vs_first")
+        lines.append(
+            f"| {r['label']} | {r['n_seeds']} | {pm(r, 'final')} | {r['min_final']:.2f} "
+            f"| {r['seeds_at_target']}/{r['n_seeds']} | {pm(r, 'best')} "
+            f"| {r['steps_to_target']:,.0f} ({r['seeds_reached_target']}/{r['n_seeds']}) "
+            f"| {r['run_seconds_to_target'] / 60:.1f} | {r['worst_collapse']:.2f} "
+            f"| {r['first_epoch_seconds']:.0f} | {'' if p is None else f'{p:.3g}'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+@dataclasses.dataclass(frozen=True)
+class CompareArgs:
+    """Compare learners: grids of one task and reward variant trained with different
+    learner options (e.g. the paper's DDPG against TD3's additions)."""
+
+    grids: tyro.conf.Positional[tuple[str, ...]]
+    """LABEL=GRID_DIR pairs; the first is the baseline of the p-values."""
+    out: str = "learners"
+    """Folder for learners.png, learners.csv/.json/.md."""
+    variant: str = "full"
+    """Reward variant of the grids to compare."""
+
+
+def parse_labelled(items: tuple[str, ...]) -> list[tuple[str, Path]]:
+    """``LABEL=GRID_DIR`` strings as (label, path); ValueError naming a malformed one."""
+    out = []
+    for item in items:
+        label, sep, path = item.partition("=")
+        if not sep or not label or not path:
+            raise ValueError(f"{item!r}: expected LABEL=GRID_DIR, e.g. ddpg=runs/clap-ddpg")
+        out.append((label, Path(path)))
+    if not out:
+        raise ValueError("give at least one LABEL=GRID_DIR")
+    return out
+
+
+def compare_main(argv: list[str]) -> int:
+    args = tyro.cli(CompareArgs, args=argv)
+    try:
+        labelled = parse_labelled(args.grids)
+        rows = compare_learners(labelled, args.variant)
+    except (FileNotFoundError, ValueError, KeyError, json.JSONDecodeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plot_learners(labelled, args.variant, out / "learners.png")
+    (out / "learners.json").write_text(json.dumps(rows, indent=2))
+    flat = [{k: v for k, v in r.items() if not isinstance(v, list)} for r in rows]
+    with (out / "learners.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=sorted({k for r in flat for k in r}, key=str))
+        writer.writeheader()
+        writer.writerows(flat)
+    text = learners_markdown(rows)
+    (out / "learners.md").write_text(text)
+    print(text)
+    return 0
+
+
+USAGE = """usage: python -m mjx_hands.experiments {run,report,compare} [--help] ...
+
+  run      train seeds x reward variants of one task as one population
+  report   Fig.-4-style plot, summary table and the paper's statements from grids
+  compare  learners side by side: grids of one task trained with different options"""
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    commands = {"run": run_main, "report": report_main}
+    commands = {"run": run_main, "report": report_main, "compare": compare_main}
     if not argv or argv[0] not in commands:
         if argv and argv[0] in ("-h", "--help"):
             print(USAGE)
             return 0
         print(USAGE, file=sys.stderr)
-        print(f"error: expected a command, run or report; got {argv[:1] or 'none'}", file=sys.stderr)
+        print(
+            f"error: expected a command, run, report or compare; got {argv[:1] or 'none'}",
+            file=sys.stderr,
+        )
         return 2
     return commands[argv[0]](argv[1:])
 

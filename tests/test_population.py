@@ -288,6 +288,40 @@ def test_curves_average_seeds_at_shared_evaluations(tmp_path):
     np.testing.assert_allclose(c["env_steps"], [1000, 2000])
 
 
+def test_seed_record_finds_the_target_and_the_worst_fall_by_hand():
+    evals = [
+        {"epoch": e, "train/env_steps": 1000 * e, "time/wall_seconds": 60 * e,
+         "eval/success_final": v}
+        for e, v in zip(range(1, 8), (0.1, 0.85, 0.95, 0.6, 0.9, 0.97, 0.92))
+    ]  # fmt: skip
+    record = experiments.seed_record(evals, 42.0)
+    assert record["final"] == 0.92 and record["best"] == 0.97
+    assert record["steps_to_target"] == 3000 and record["seconds_to_target"] == 180
+    assert record["collapse"] == pytest.approx(0.35)  # best 0.95 so far, then 0.6
+    assert record["first_epoch_seconds"] == 42.0
+    never = experiments.seed_record(evals[:1], 1.0)
+    assert math.isnan(never["steps_to_target"]) and never["collapse"] == 0.0
+
+
+def test_compare_learners_from_grids(tmp_path, capsys):
+    paper = _fixture_grid(tmp_path / "a", "handclap", {"full": [0.9, 0.8, 1.0]}, {"full": [0] * 3})
+    other = _fixture_grid(tmp_path / "b", "handclap", {"full": [0.5, 0.7, 0.6]}, {"full": [0] * 3})
+    argv = ["compare", f"ddpg={paper}", f"td3={other}", "--out", str(tmp_path / "cmp")]
+    assert experiments.main(argv) == 0
+    rows = json.loads((tmp_path / "cmp" / "learners.json").read_text())
+    assert [r["label"] for r in rows] == ["ddpg", "td3"]
+    assert rows[0]["final"] == pytest.approx(0.9) and rows[0]["seeds_at_target"] == 2
+    assert rows[0]["seeds_reached_target"] == 2 and rows[0]["min_final"] == 0.8
+    # Seeds 1 and 2 first evaluate 0.1 and 0.2 (< 0.8): no fall counted before 0.8.
+    assert rows[0]["worst_collapse"] == 0.0
+    # Welch's p of td3's finals against the baseline's (same spread, means 0.6 vs 0.9).
+    assert rows[1]["p_final_vs_first"] == pytest.approx(experiments.welch([0.5, 0.7, 0.6], [0.9, 0.8, 1.0])[1])
+    assert (tmp_path / "cmp" / "learners.png").stat().st_size > 5000
+    assert "| td3 | 3 | 0.60 ± 0.06 |" in (tmp_path / "cmp" / "learners.md").read_text()
+    assert experiments.main(["compare", str(paper)]) == 2
+    assert "expected LABEL=GRID_DIR" in capsys.readouterr().err
+
+
 def test_grid_members_differ_only_in_seed_and_variant():
     grid = experiments.GridConfig(variants=("full", "no_imitation"), seeds=2,
                      train=dataclasses.replace(training.preset("cpu"), run_dir="g", seed=3))
