@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any, Protocol, runtime_checkable
 
 import jax
+import jax.numpy as jnp
 from brax.envs.base import State
 
 INFO_KEYS = {
@@ -72,3 +73,35 @@ def missing_info(state: State) -> list[str]:
     if "episode" in state.info and not hasattr(state.info["episode"], "rng"):
         missing.append("episode.rng")
     return missing
+
+
+POSE_PREFIX = "pose/"
+"""``State.metrics`` entries under this prefix (e.g. ``pose/fingertip_goal_distance``,
+metres) are reported at the last step of evaluation episodes as ``eval/final_<name>``."""
+
+
+def evaluation_metrics(
+    reward: jax.Array, success: jax.Array, final_metrics: dict[str, jax.Array]
+) -> dict[str, jax.Array]:
+    """The one result schema of an evaluation, for every learner and for ``evaluate``.
+
+    Args:
+      reward: (T, ..., n) rewards of n whole episodes of T steps.
+      success: (T, ..., n) the success flag per step.
+      final_metrics: ``State.metrics`` at the last step, entries (..., n).
+    Returns (...) arrays: ``eval/episode_return`` (mean return), ``eval/success`` (share
+    of episodes successful at some step), ``eval/success_final`` (at the last step: the
+    headline) and ``eval/final_<name>`` per ``pose/<name>`` metric (NaN-skipping mean:
+    diverged episodes have no pose).
+    """
+    metrics = {
+        "eval/episode_return": jnp.sum(reward, axis=0).mean(axis=-1),
+        "eval/success": jnp.max(success, axis=0).mean(axis=-1),
+        "eval/success_final": jnp.asarray(success[-1]).mean(axis=-1),
+    }
+    metrics |= {
+        f"eval/final_{k.removeprefix(POSE_PREFIX)}": jnp.nanmean(v, axis=-1)
+        for k, v in final_metrics.items()
+        if k.startswith(POSE_PREFIX)
+    }
+    return metrics

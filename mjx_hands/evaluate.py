@@ -26,7 +26,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, contact_profile, shadow_hand, training
+from mjx_hands import checkpoint, contact_profile, contract, shadow_hand, training
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,8 +136,9 @@ def rollout(
         (T+1, n, ...) beside the rest (e.g. hand points for the naturalness metrics).
 
     Returns reward (T, n) and success (T, n), T the episode length; for the hand
-    environments also contacts (T, n, 15), the sensor readings, and qpos (T+1, n, nq),
-    mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering.
+    environments also contacts (T, n, 15), the sensor readings, qpos (T+1, n, nq),
+    mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering, and
+    the last step's ``pose/<name>`` metrics (n,).
     """
     reset = jax.jit(reset or jax.vmap(single.reset))
     step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
@@ -161,23 +162,32 @@ def rollout(
         record["success"].append(np.asarray(state.info["success"]))
         if has_contacts:
             record["contacts"].append(np.stack([np.asarray(state.metrics[k]) for k in sensors], -1))
-    return {key: np.stack(values) for key, values in record.items() if values}
+    out = {key: np.stack(values) for key, values in record.items() if values}
+    # The last step's pose metrics (n,): the final pose errors of the result schema.
+    out |= {
+        k: np.asarray(v) for k, v in state.metrics.items() if k.startswith(contract.POSE_PREFIX)
+    }
+    return out
 
 
 def summarize(single, trajectory: dict[str, np.ndarray]) -> tuple[dict, dict | None]:
     """(metrics, contact profile or None) of a :func:`rollout`: the training's evaluation
-    metrics (success at some step and at the last step, mean return) and, for the hand
-    environments, :func:`contact_profile.summarize` of the sensor readings."""
-    success = trajectory["success"] > 0.5
-    metrics = {
-        "eval/episode_return": float(trajectory["reward"].sum(0).mean()),
-        "eval/success": float(success.any(0).mean()),
-        "eval/success_final": float(success[-1].mean()),
-    }
+    metrics (:func:`contract.evaluation_metrics`: success at some step and at the last
+    step, mean return, final pose errors) and, for the hand environments,
+    :func:`contact_profile.summarize` of the sensor readings."""
+    final = {k: v for k, v in trajectory.items() if k.startswith(contract.POSE_PREFIX)}
+    arrays = contract.evaluation_metrics(
+        trajectory["reward"], (trajectory["success"] > 0.5).astype(np.float32), final
+    )
+    metrics = {k: float(v) for k, v in arrays.items()}
     if "contacts" not in trajectory:
         return metrics, None
     groups = np.asarray(single.params.success_groups[0])
     return metrics, contact_profile.summarize(trajectory["contacts"], groups)
+
+
+VIDEO_KEYS = ("qpos", "mocap_pos", "mocap_quat")
+"""The :func:`rollout` arrays (T+1, n, ...) that :func:`render_video` reads."""
 
 
 def render_video(single, trajectory, path: Path, camera: str, width: int, height: int, fps: float):
@@ -268,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
         touched = ", ".join(f"{n} {profile['touched'][n]:.2f}" for n in profile["required"])
         print(f"required sensors touched (share of episodes): {touched}; plot: {plot_path}")
     if args.video_episodes > 0:
-        shown = {k: v[:, : args.video_episodes] for k, v in trajectory.items()}
+        shown = {k: trajectory[k][:, : args.video_episodes] for k in VIDEO_KEYS}
         video = Path(args.video or run_dir / "eval.mp4")
         try:
             render_video(

@@ -86,8 +86,21 @@ class TrainConfig:
     """Include the replay buffer in checkpoints (resume then equals an uninterrupted run)."""
     ddpg: DDPGConfig = DDPGConfig()
     """DDPG hyperparameters."""
+    replay_ratio: float | None = None
+    """Replayed transitions per collected one (updates x batch size / env steps), held as
+    --num-envs changes: when set, it fixes --ddpg.updates-per-iteration (rounded to a
+    multiple of --ddpg.actor-update-interval, at least one). Both presets replay 25.6."""
 
     def __post_init__(self):
+        if (
+            self.replay_ratio is not None
+            and math.isfinite(self.replay_ratio)
+            and self.replay_ratio > 0
+        ):
+            # Resolved here, so config.json records the updates the run makes.
+            object.__setattr__(
+                self, "ddpg", updates_for_ratio(self.ddpg, self.num_envs, self.replay_ratio)
+            )
         problems = []
         for name in ("num_envs", "epochs", "eval_every", "eval_envs", "checkpoint_every"):
             if getattr(self, name) <= 0:
@@ -100,6 +113,10 @@ class TrainConfig:
                 problems.append(
                     f"--{name.replace('_', '-')} must be a positive number, got {value}"
                 )
+        if self.replay_ratio is not None and not (
+            math.isfinite(self.replay_ratio) and self.replay_ratio > 0
+        ):
+            problems.append(f"--replay-ratio must be a positive number, got {self.replay_ratio}")
         if not (math.isfinite(self.target_rotation_noise) and self.target_rotation_noise >= 0):
             problems.append(
                 f"--target-rotation-noise must be a finite number >= 0, got "
@@ -109,6 +126,16 @@ class TrainConfig:
             problems.append(f"--mocap {self.mocap}: no such folder")
         if problems:
             raise ValueError("; ".join(problems))
+
+
+def updates_for_ratio(ddpg: DDPGConfig, num_envs: int, ratio: float) -> DDPGConfig:
+    """``ddpg`` with the updates per iteration that replay ``ratio`` sampled transitions per
+    env step at ``num_envs`` envs: ratio x num_envs x unroll / batch, rounded to a multiple
+    of the actor update interval (at least one interval)."""
+    collected = num_envs * ddpg.unroll_length
+    interval = ddpg.actor_update_interval
+    updates = max(interval, interval * round(ratio * collected / ddpg.batch_size / interval))
+    return dataclasses.replace(ddpg, updates_per_iteration=updates)
 
 
 def preset(kind: str, **overrides: Any) -> TrainConfig:

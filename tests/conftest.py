@@ -9,6 +9,9 @@ import pytest
 
 # Keep XLA from spawning more compile/compute threads than CI's 2 cores serve well.
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=true")
+# Render videos in this process too: MuJoCo picks its GL platform at import.
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
 
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "mocap" / "drl_handshake"
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from mjx_hands import contract
@@ -45,3 +46,24 @@ def test_a_state_without_the_contracts_info_is_named():
     del state.info["success"]
     state.info["episode"] = ()
     assert contract.missing_info(state) == ["success", "episode.rng"]
+
+
+def test_evaluation_metrics_match_a_numpy_transcription():
+    rng = np.random.default_rng(0)
+    reward = rng.normal(size=(7, 3, 5))  # (T, members, episodes)
+    success = (rng.random((7, 3, 5)) > 0.6).astype(np.float32)
+    distance = rng.random((3, 5))
+    distance[1, 2] = np.nan  # a diverged episode has no pose
+    final = {"pose/fingertip_goal_distance": distance, "reward/total": reward[-1]}
+    got = contract.evaluation_metrics(reward, success, final)
+    assert set(got) == {
+        "eval/episode_return",
+        "eval/success",
+        "eval/success_final",
+        "eval/final_fingertip_goal_distance",
+    }
+    np.testing.assert_allclose(got["eval/episode_return"], reward.sum(0).mean(-1), rtol=1e-6)
+    np.testing.assert_allclose(got["eval/success"], success.any(0).mean(-1))
+    np.testing.assert_allclose(got["eval/success_final"], success[-1].mean(-1))
+    expected = [np.mean([d for d in row if np.isfinite(d)]) for row in distance]
+    np.testing.assert_allclose(got["eval/final_fingertip_goal_distance"], expected, rtol=1e-6)

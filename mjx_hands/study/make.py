@@ -136,7 +136,7 @@ def make(args: MakeArgs, log=sys.stdout) -> layout.Study:
         sides = {"left": left, "right": next(p for p in layout.POLICIES if p != left)}
         for side, policy_name in sides.items():
             single, trajectory = rendered[policy_name]
-            shown = {k: v[:, episode : episode + 1] for k, v in trajectory.items()}
+            shown = {k: trajectory[k][:, episode : episode + 1] for k in evaluate.VIDEO_KEYS}
             evaluate.render_video(
                 single,
                 shown,

@@ -34,6 +34,7 @@ import numpy as np
 import optax
 from flax import struct
 
+from mjx_hands import contract
 from mjx_hands.agents.ddpg import losses, networks, replay
 
 AXIS = "devices"
@@ -744,16 +745,7 @@ class DDPG:
         start = self._reset_members(env, rng)
         final, (reward, success) = jax.lax.scan(step, start, None, length=self.episode_length)
         # reward, success: (steps, members, envs)
-        metrics = {
-            "eval/episode_return": reward.sum(axis=0).mean(axis=-1),
-            "eval/success": success.max(axis=0).mean(axis=-1),
-            "eval/success_final": success[-1].mean(axis=-1),
-        }
-        metrics |= {
-            f"eval/final_{k.removeprefix('pose/')}": jnp.nanmean(v, axis=-1)
-            for k, v in final.metrics.items()
-            if k.startswith("pose/")
-        }
+        metrics = contract.evaluation_metrics(reward, success, final.metrics)
         return jax.lax.pmean(metrics, AXIS)
 
 
