@@ -260,7 +260,7 @@ def plot_motion(summary: dict, path: Path) -> None:
     ax.set_ylabel("success rate")
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
-    ax.legend(loc="best")
+    ax.legend(loc="lower left")
     ax.set_title(
         f"{summary['task']}: moving target, turns every {summary['turn_period']} s "
         f"({summary['runs']} run(s))"
