@@ -607,21 +607,57 @@ def _first_epoch_seconds(grid_dir: Path, member: dict[str, Any]) -> float:
     return first.get("time/wall_seconds", math.nan) if first else math.nan
 
 
+def _grouped(labelled: list[tuple[str, Path]]) -> dict[str, list[Path]]:
+    """Grid folders per label, labels in first-seen order (a label may name several grids:
+    e.g. seeds 0-2 from one grid and seeds 3-4 from another of the same config)."""
+    groups: dict[str, list[Path]] = {}
+    for label, path in labelled:
+        groups.setdefault(label, []).append(path)
+    return groups
+
+
+def _merged(grid_dirs: list[Path], variant: str) -> dict[str, Any]:
+    """The members of ``variant`` of several grids of one task as one grid record; each
+    member also carries its ``grid_dir``, and its wall clock is per run (see below)."""
+    grids = [load_grid(d) for d in grid_dirs]
+    tasks = {g["task"] for g in grids}
+    if len(tasks) > 1:
+        raise ValueError(
+            f"{', '.join(map(str, grid_dirs))}: grids of different tasks {sorted(tasks)}"
+        )
+    # On 2 cores SGD sets the pace, so a grid costs about members x one run: its wall
+    # clock over its member count is what one run alone would take on the same cores.
+    members = [
+        m
+        | {
+            "grid_dir": Path(g["dir"]),
+            "evals": [
+                r | {"time/wall_seconds": r.get("time/wall_seconds", math.nan) / len(g["members"])}
+                for r in m["evals"]
+            ],
+        }
+        for g in grids
+        for m in g["members"]
+        if m["variant"] == variant and m["evals"]
+    ]
+    if not members:
+        raise ValueError(f"{', '.join(map(str, grid_dirs))}: no evaluated member of {variant!r}")
+    return {"task": tasks.pop(), "dir": str(grid_dirs[0]), "members": members}
+
+
 def compare_learners(labelled: list[tuple[str, Path]], variant: str) -> list[dict[str, Any]]:
-    """One row per labelled grid (its members of ``variant``): mean +- SE over seeds of the
-    :func:`seed_record` figures (``run_seconds_to_target``: the grid's wall clock over its
-    member count, what one run alone would take on the same cores), how many seeds met
-    the targets, and Welch's p of the final success against the first grid's."""
+    """One row per label (the members of ``variant`` of its grids): mean +- SE over seeds
+    of the :func:`seed_record` figures (seconds per run: the grid's wall clock over its
+    member count), how many seeds met the targets, and Welch's p of the final success
+    against the first label's."""
     rows = []
-    for label, grid_dir in labelled:
-        grid = load_grid(grid_dir)
-        members = [m for m in grid["members"] if m["variant"] == variant and m["evals"]]
-        if not members:
-            raise ValueError(f"{grid_dir}: no evaluated member of variant {variant!r}")
-        seeds = [seed_record(m["evals"], _first_epoch_seconds(grid_dir, m)) for m in members]
-        for seed in seeds:  # on 2 cores SGD sets the pace: a grid costs members x one run
-            seed["run_seconds_to_target"] = seed["seconds_to_target"] / len(grid["members"])
+    for label, grid_dirs in _grouped(labelled).items():
+        grid = _merged(grid_dirs, variant)
+        members = grid["members"]
+        seeds = [seed_record(m["evals"], _first_epoch_seconds(m["grid_dir"], m)) for m in members]
         row: dict[str, Any] = {"label": label, "task": grid["task"], "n_seeds": len(seeds)}
+        row["seeds"] = [m["seed"] for m in members]
+        row["grids"] = [str(d) for d in grid_dirs]
         row["final_epoch"] = min(m["evals"][-1]["epoch"] for m in members)
         row["final_env_steps"] = float(
             np.mean([m["evals"][-1]["train/env_steps"] for m in members])
@@ -649,17 +685,15 @@ def plot_learners(labelled: list[tuple[str, Path]], variant: str, path: Path) ->
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     task = ""
-    for label, grid_dir in labelled:
-        grid = load_grid(grid_dir)
+    for label, grid_dirs in _grouped(labelled).items():
+        grid = _merged(grid_dirs, variant)
         task = grid["task"]
-        c = curves(grid).get(variant)
-        if c is None:
-            continue
+        c = curves(grid)[variant]
         for ax, x in zip(axes, (c["env_steps"], c["wall_seconds"] / 60)):
             ax.plot(x, c["mean"], label=f"{label} (n={c['n']})")
             ax.fill_between(x, c["mean"] - c["se"], c["mean"] + c["se"], alpha=0.2)
     axes[0].set_xlabel("environment steps per run")
-    axes[1].set_xlabel("wall clock of the grid, minutes")
+    axes[1].set_xlabel("minutes per run (the grid's wall clock / its members)")
     for ax in axes:
         ax.axhline(TARGET_SUCCESS, color="grey", lw=0.8, ls="--")
         ax.set_ylim(-0.02, 1.02)
@@ -689,7 +723,7 @@ def learners_markdown(rows: list[dict[str, Any]]) -> str:
             f"| {r['label']} | {r['n_seeds']} | {pm(r, 'final')} | {r['min_final']:.2f} "
             f"| {r['seeds_at_target']}/{r['n_seeds']} | {pm(r, 'best')} "
             f"| {r['steps_to_target']:,.0f} ({r['seeds_reached_target']}/{r['n_seeds']}) "
-            f"| {r['run_seconds_to_target'] / 60:.1f} | {r['worst_collapse']:.2f} "
+            f"| {r['seconds_to_target'] / 60:.1f} | {r['worst_collapse']:.2f} "
             f"| {r['first_epoch_seconds']:.0f} | {'' if p is None else f'{p:.3g}'} |"
         )
     return "\n".join(lines) + "\n"
@@ -701,7 +735,8 @@ class CompareArgs:
     learner options (e.g. the paper's DDPG against TD3's additions)."""
 
     grids: tyro.conf.Positional[tuple[str, ...]]
-    """LABEL=GRID_DIR pairs; the first is the baseline of the p-values."""
+    """LABEL=GRID_DIR pairs; the first label is the baseline of the p-values; a label given
+    twice pools the members of its grids (e.g. seeds 0-2 and 3-4 trained apart)."""
     out: str = "learners"
     """Folder for learners.png, learners.csv/.json/.md."""
     variant: str = "full"
