@@ -1,7 +1,7 @@
 """Deep deterministic policy gradient, jitted end to end over batched environments and
 over a population of independent runs."""
 
-from mjx_hands.agents.ddpg.train import (
+from mjx_hands.agents.ddpg.learner import (
     DDPG,
     DDPGConfig,
     LearnerState,
