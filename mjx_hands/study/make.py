@@ -55,9 +55,9 @@ class MakeArgs:
     """Seed of the episodes, the left/right draw and the pair order."""
     camera: Literal["side", "top"] = "side"
     """Scene camera."""
-    width: int = 480
-    """Video width in pixels."""
-    height: int = 360
+    width: int = 512
+    """Video width in pixels (a multiple of 16 keeps codecs from resizing)."""
+    height: int = 384
     """Video height in pixels."""
 
 
