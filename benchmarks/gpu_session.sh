@@ -6,6 +6,7 @@
 #   BUDGET_S=560 bash benchmarks/gpu_session.sh
 #   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
 #   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
+#   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG vs TD3 options, 5 seeds
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
@@ -83,10 +84,36 @@ grid() {
     --out "$OUT/fig4" 2>&1 | tee "$OUT/report.log"
 }
 
+learners() {
+  # The paper's DDPG against TD3's additions (issue evidence): 5 seeds of the full reward
+  # each, the two grids in equal shares of what is left, then `experiments compare`.
+  task=${LEARNER_TASK:-handshake}
+  td3="--ddpg.twin-critics --ddpg.target-policy-noise 0.2 --ddpg.actor-update-interval 2 \
+    --ddpg.n-step 3 --ddpg.layer-norm"
+  n=2
+  for learner in ddpg td3; do
+    left=$((BUDGET_S - SECONDS))
+    minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
+    n=1
+    options=""; [ "$learner" = td3 ] && options="$td3"
+    echo "== learners $learner on $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+    rm -rf "/tmp/learners-$learner"
+    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
+      --preset gpu --variants full --seeds 5 --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
+      --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
+      --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/learners-$learner" \
+      $options ${GRID_ARGS:-} 2>&1 | tee "$OUT/learners-$learner.log"
+    (cd /tmp && find "learners-$learner" -name checkpoints -prune -o -name best -prune -o -type f \
+      -print | tar -cf - -T -) | tar -xf - -C "$OUT"
+  done
+  python3 -m mjx_hands.experiments compare ddpg="$OUT/learners-ddpg" td3="$OUT/learners-td3" \
+    --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
+}
+
 for stage in $STAGES; do
   case $stage in
-    throughput|train|grid) "$stage" ;;
-    *) echo "unknown stage $stage; expected throughput, train or grid" >&2; exit 2 ;;
+    throughput|train|grid|learners) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput, train, grid or learners" >&2; exit 2 ;;
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"
