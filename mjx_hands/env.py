@@ -108,12 +108,17 @@ def select_demos(demos: list, task: str, which: str) -> list:
     return [by_row[r] for r in rows]
 
 
+def random_direction(rng: jax.Array) -> jax.Array:
+    """A unit vector (3,) uniformly distributed on the sphere."""
+    v = jax.random.normal(rng, (3,))
+    return v / jnp.maximum(jnp.linalg.norm(v), 1e-9)
+
+
 def target_tilt(rng: jax.Array, noise: float, angle: float | None = None) -> jax.Array:
     """Quaternion (4,) of the target hand's per-episode tilt: about a uniformly random
     axis, by ``angle`` radians if given, else by a Gaussian angle of std ``noise``."""
     k_axis, k_angle = jax.random.split(rng)
-    axis = jax.random.normal(k_axis, (3,))
-    axis = axis / jnp.linalg.norm(axis)
+    axis = random_direction(k_axis)
     if angle is None:
         angle = noise * jax.random.normal(k_angle, ())
     return spatial.axis_angle_quat(axis, jnp.asarray(angle, jnp.float32))
@@ -130,12 +135,6 @@ def yaw_pitch_quat(yaw: jax.Array, pitch: jax.Array) -> jax.Array:
         spatial.axis_angle_quat(z, jnp.asarray(yaw, jnp.float32)),
         spatial.axis_angle_quat(y, jnp.asarray(pitch, jnp.float32)),
     )
-
-
-def random_direction(rng: jax.Array) -> jax.Array:
-    """A unit vector (3,) uniformly distributed on the sphere."""
-    v = jax.random.normal(rng, (3,))
-    return v / jnp.maximum(jnp.linalg.norm(v), 1e-9)
 
 
 def reflect_into_box(

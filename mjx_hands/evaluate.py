@@ -15,6 +15,7 @@ return and the contact profile (which sensors touched, when; plotted to
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import sys
@@ -117,6 +118,18 @@ def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128, be
     return algo, tree["learner"], config, single, tree["epoch"]
 
 
+@functools.lru_cache(maxsize=8)
+def compiled_rollout(single, policy, reset=None, extra=None):
+    """The jitted (reset, step, per-state record) of :func:`rollout`, kept per (env,
+    policy, reset, extra): a sweep that rolls out chunk after chunk compiles once."""
+    reset = jax.jit(reset or jax.vmap(single.reset))
+    step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
+    per_state = jax.jit(
+        jax.vmap(lambda s: single.pose(s.pipeline_state) | (extra(s) if extra else {}))
+    )
+    return reset, step, per_state
+
+
 def rollout(
     single,
     policy,
@@ -140,14 +153,10 @@ def rollout(
     mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering, and
     the last step's ``pose/<name>`` metrics (n,).
     """
-    reset = jax.jit(reset or jax.vmap(single.reset))
-    step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
+    reset, step, per_state = compiled_rollout(single, policy, reset, extra)
     state = reset(jax.random.split(rng, num_episodes), *reset_args)
     sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
     has_contacts = all(k in state.metrics for k in sensors)
-    per_state = jax.jit(
-        jax.vmap(lambda s: single.pose(s.pipeline_state) | (extra(s) if extra else {}))
-    )
     record = {key: [] for key in ("reward", "success", "contacts")}
 
     def keep(state):  # host copies only: whole mjx.Data per step would pile up on device
