@@ -8,8 +8,10 @@ draws a fresh demonstration, target and start for every episode. The environment
 budget equals DDPG's for the same config: ``epochs × num_envs × unroll_length ×
 iterations_per_epoch`` steps; ``eval_every`` sets how many evaluations Brax runs.
 Networks are 3×256 like DDPG's. After training the deterministic policy is evaluated
-with the same success measure as DDPG (:func:`mjx_hands.evaluate.rollout`) and the
-parameters are saved with ``brax.io.model`` as ``RUN_DIR/brax_params.pkl``.
+with the same success measure as DDPG (:func:`mjx_hands.rollouts.rollout`) and the
+parameters are saved with ``brax.io.model`` as ``RUN_DIR/brax_params.pkl``;
+:func:`load_policy` rebuilds the policy from them (``mjx_hands.evaluate`` and the other
+evaluations load a SAC or PPO run through it).
 """
 
 from __future__ import annotations
@@ -23,6 +25,13 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from mjx_hands.rollouts import episode_keys, rollout, summarize
+
+ALGOS = ("sac", "ppo")
+"""The Brax trainers this module runs (``TrainConfig.algo``)."""
+PARAMS_FILE = "brax_params.pkl"
+"""The trained parameters in a run folder (``brax.io.model`` format)."""
 
 
 def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomization_fn=None):
@@ -71,6 +80,63 @@ def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomizatio
     return BraxTrainingEnv(env, num_envs=None)
 
 
+def network_factory(config):
+    """Brax's network factory for ``config.algo``, hidden layers as DDPG's."""
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.sac import networks as sac_networks
+
+    hidden = tuple(config.ddpg.hidden_sizes)
+    if config.algo == "ppo":
+        return functools.partial(
+            ppo_networks.make_ppo_networks,
+            policy_hidden_layer_sizes=hidden,
+            value_hidden_layer_sizes=hidden,
+        )
+    if config.algo == "sac":
+        return functools.partial(sac_networks.make_sac_networks, hidden_layer_sizes=hidden)
+    raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected one of {ALGOS}")
+
+
+def load_policy(run_dir, config, single):
+    """(act, params) of a SAC or PPO run: the parameters it saved, in networks rebuilt as
+    its trainer built them (observations normalised); ``act``: observations
+    (..., observation_size) -> deterministic actions (..., action_size)."""
+    from pathlib import Path
+
+    from brax.io import model as brax_model
+    from brax.training.acme import running_statistics
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.sac import networks as sac_networks
+
+    path = Path(run_dir) / PARAMS_FILE
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{run_dir} holds no {config.algo} parameters ({PARAMS_FILE} missing): its "
+            "training did not finish"
+        )
+    params = brax_model.load_params(str(path))
+    normalize = running_statistics.normalize
+    if config.algo == "ppo":
+        networks = network_factory(config)(
+            (single.observation_size,), single.action_size, preprocess_observations_fn=normalize
+        )
+        make_policy = ppo_networks.make_inference_fn(networks)
+    else:
+        networks = network_factory(config)(
+            observation_size=single.observation_size,
+            action_size=single.action_size,
+            preprocess_observations_fn=normalize,
+        )
+        make_policy = sac_networks.make_inference_fn(networks)
+    return _deterministic(make_policy, params), params
+
+
+def _deterministic(make_policy, params):
+    """obs -> action of Brax's ``make_policy`` (the mode: no sampling, so no key used)."""
+    policy = make_policy(params, deterministic=True)
+    return lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
+
+
 def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     """Train Brax's SAC or PPO (``config.algo``) on the task; the run directory holds
     config.json, metrics.csv, success.png and the parameters (no checkpoint to resume).
@@ -78,16 +144,13 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     ``env_factory``: see :func:`mjx_hands.training.make_learner`.
     """
     from brax.io import model as brax_model
-    from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as ppo
-    from brax.training.agents.sac import networks as sac_networks
     from brax.training.agents.sac import train as sac
 
     from mjx_hands import training
-    from mjx_hands.evaluate import rollout, summarize
 
     run_dir = training.run_directory(config)
-    if config.algo not in ("sac", "ppo"):
+    if config.algo not in ALGOS:
         raise ValueError(f"brax_agents.run trains sac or ppo, not {config.algo!r}")
     if config.resume:
         raise ValueError(
@@ -135,7 +198,6 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
         "progress_fn": progress,
         "wrap_env_fn": wrap_for_brax,
     }
-    hidden = tuple(ddpg.hidden_sizes)
     if config.algo == "ppo":
         make_policy, params, _ = ppo.train(
             **common,
@@ -145,11 +207,7 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
             num_minibatches=4,
             num_updates_per_batch=4,
             entropy_cost=1e-3,
-            network_factory=functools.partial(
-                ppo_networks.make_ppo_networks,
-                policy_hidden_layer_sizes=hidden,
-                value_hidden_layer_sizes=hidden,
-            ),
+            network_factory=network_factory(config),
         )
     elif config.algo == "sac":
         make_policy, params, _ = sac.train(
@@ -159,17 +217,15 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
             min_replay_size=ddpg.min_replay_size,
             max_replay_size=ddpg.replay_capacity,
             grad_updates_per_step=max(1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)),
-            network_factory=functools.partial(
-                sac_networks.make_sac_networks, hidden_layer_sizes=hidden
-            ),
+            network_factory=network_factory(config),
         )
     else:
         raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected sac or ppo")
-    brax_model.save_params(str(run_dir / "brax_params.pkl"), params)
+    brax_model.save_params(str(run_dir / PARAMS_FILE), params)
 
-    policy = make_policy(params, deterministic=True)
-    act = lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
-    trajectory = rollout(single, act, config.eval_envs, jax.random.PRNGKey(config.seed + 1))
+    # Brax's own inference function here; load_policy rebuilds it (tests compare the two).
+    act = _deterministic(make_policy, params)
+    trajectory = rollout(single, act, episode_keys(config.seed + 1, config.eval_envs))
     final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()

@@ -15,7 +15,6 @@ return and the contact profile (which sensors touched, when; plotted to
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import os
 import sys
@@ -24,10 +23,10 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import jax
-import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, contact_profile, contract, shadow_hand, training
+from mjx_hands import brax_agents, checkpoint, contact_profile, training
+from mjx_hands.rollouts import episode_keys, rollout, summarize
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,23 +59,26 @@ class EvalArgs:
     the same scene (e.g. a policy trained on native MuJoCo evaluated on MJX)."""
 
 
-def restore_run(
-    run_dir: Path,
-    step: int | None = None,
-    eval_envs: int | None = None,
-    best: bool = False,
-    learner_only: bool = False,
-):
-    """(algo, checkpoint tree, config, single env) of a run's checkpoint; nothing compiled.
+@dataclasses.dataclass(frozen=True)
+class LoadedPolicy:
+    """A trained policy, ready to roll out, and what it was trained on."""
 
-    The tree is what training saved: ``learner``, ``env_state`` (leaves with a leading
-    device axis), ...; with ``best`` or ``learner_only``, the ``learner`` only (read by
-    path, so checkpoints whose environment state has another layout still load).
-    ``eval_envs`` overrides the run's evaluation batch.
-    """
-    if not Path(run_dir).is_dir():
-        raise FileNotFoundError(f"{run_dir}: no such run folder")
-    ckpt_dir = Path(run_dir) / (training.BEST_DIR if best else "checkpoints")
+    act: Callable[[jax.Array], jax.Array]
+    """Deterministic policy: observations (..., observation_size) -> actions
+    (..., action_size); jittable, and the same object for as long as it is kept (so
+    :func:`mjx_hands.rollouts.rollout` compiles it once)."""
+    params: Any
+    """The learner's own parameters (DDPG: its ``LearnerState``; Brax: its params)."""
+    config: training.TrainConfig
+    """The run's config, with the evaluation batch asked for."""
+    single: Any
+    """The run's single (unbatched) environment."""
+    epoch: int
+    """Epoch of the parameters (Brax's trainers: the last, the only one they keep)."""
+
+
+def _checkpoint_dir(run_dir: Path, best: bool) -> Path:
+    ckpt_dir = run_dir / (training.BEST_DIR if best else "checkpoints")
     if not best and not ckpt_dir.is_dir():
         raise checkpoint.CheckpointError(
             f"{run_dir} holds no trained policy ({ckpt_dir.name}/ missing): give a folder "
@@ -87,10 +89,20 @@ def restore_run(
             f"{run_dir} has no best policy ({ckpt_dir} missing): it was trained before "
             "train.py kept one, or it never evaluated; evaluate the latest checkpoint instead"
         )
+    return ckpt_dir
+
+
+def _checkpointed_learner(
+    run_dir: Path, step: int | None, eval_envs: int | None, best: bool, env_factory=None
+):
+    """(algo, single env, config, checkpoint folder, step, metadata) of a DDPG run's
+    checkpoint, its digest verified; nothing compiled, nothing restored yet."""
+    if not run_dir.is_dir():
+        raise FileNotFoundError(f"{run_dir}: no such run folder")
+    ckpt_dir = _checkpoint_dir(run_dir, best)
     step = checkpoint.resolve_step(ckpt_dir, step)  # the newest intact one when None
     meta = checkpoint.read_metadata(ckpt_dir, step, verified=True)
-    config = training.config_from_json(meta["config"])
-    config = dataclasses.replace(config, resume=False)
+    config = dataclasses.replace(training.config_from_json(meta["config"]), resume=False)
     if eval_envs is not None:
         config = dataclasses.replace(config, eval_envs=eval_envs)
     num_devices = int(meta.get("num_devices", 1))
@@ -101,98 +113,64 @@ def restore_run(
             f"Run with {num_devices} devices (CPU: XLA_FLAGS=--xla_force_host_platform_device_count="
             f"{num_devices})"
         )
-    algo, single = training.make_learner(config, devices=devices)
+    algo, single = training.make_learner(config, devices=devices, env_factory=env_factory)
+    return algo, single, config, ckpt_dir, step, meta
+
+
+def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = None):
+    """(algo, checkpoint tree, config, single env) of a DDPG run's whole checkpoint:
+    ``learner``, ``env_state`` (leaves with a leading device axis), ..., and ``epoch``;
+    nothing compiled. ``eval_envs`` overrides the run's evaluation batch."""
+    algo, single, config, ckpt_dir, step, meta = _checkpointed_learner(
+        Path(run_dir), step, eval_envs, best=False
+    )
     like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
-    partial = learner_only or meta.get("contents") == "policy"
-    if partial:
-        like_tree = algo.policy_tree(like)
-    else:
-        like_tree = algo.checkpoint_tree(like, config.save_replay)
+    partial = meta.get("contents") == "policy"
+    like_tree = (
+        algo.policy_tree(like) if partial else algo.checkpoint_tree(like, config.save_replay)
+    )
     tree, meta = checkpoint.restore(ckpt_dir, like_tree, step, partial=partial, verified=True)
     return algo, tree | {"epoch": int(meta["epoch"])}, config, single
 
 
-def load_policy(run_dir: Path, step: int | None = None, eval_envs: int = 128, best: bool = False):
-    """(algo, unreplicated learner, config, single env, epoch) of a run's checkpoint."""
-    algo, tree, config, single = restore_run(run_dir, step, eval_envs, best, learner_only=True)
-    return algo, tree["learner"], config, single, tree["epoch"]
+def run_algo(run_dir: Path) -> str:
+    """The learner that trained a run (its config.json's ``algo``; DDPG without one)."""
+    path = Path(run_dir) / "config.json"
+    return training.read_config_json(path).get("algo", "ddpg") if path.is_file() else "ddpg"
 
 
-@functools.lru_cache(maxsize=8)
-def compiled_rollout(single, policy, reset=None, extra=None):
-    """The jitted (reset, step, per-state record) of :func:`rollout`, kept per (env,
-    policy, reset, extra): a sweep that rolls out chunk after chunk compiles once."""
-    reset = jax.jit(reset or jax.vmap(single.reset))
-    step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
-    per_state = jax.jit(
-        jax.vmap(lambda s: single.pose(s.pipeline_state) | (extra(s) if extra else {}))
+def load_policy(
+    run_dir: Path,
+    step: int | None = None,
+    eval_envs: int = 128,
+    best: bool = False,
+    env_factory=None,
+) -> LoadedPolicy:
+    """The policy of a run's latest checkpoint (or of ``step``, or with ``best`` the
+    best-evaluated one), loaded by the learner that trained it: DDPG from its Orbax
+    checkpoints, Brax's SAC and PPO from the parameters they saved at the end.
+    ``env_factory``: as :func:`mjx_hands.training.make_learner` (the run's task env by
+    default)."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise FileNotFoundError(f"{run_dir}: no such run folder")
+    algo_name = run_algo(run_dir)
+    if algo_name in brax_agents.ALGOS:
+        if step is not None or best:
+            raise ValueError(
+                f"{run_dir} was trained by Brax's {algo_name}, which keeps only its final "
+                "parameters: --step and --best choose among DDPG's checkpoints"
+            )
+        config = training.config_from_json(training.read_config_json(run_dir / "config.json"))
+        config = dataclasses.replace(config, eval_envs=eval_envs, resume=False)
+        _, _, single = (env_factory or training.make_envs)(config, 1)
+        act, params = brax_agents.load_policy(run_dir, config, single)
+        return LoadedPolicy(act, params, config, single, config.epochs)
+    algo, single, config, ckpt_dir, step, _ = _checkpointed_learner(
+        run_dir, step, eval_envs, best, env_factory
     )
-    return reset, step, per_state
-
-
-def rollout(
-    single,
-    policy,
-    num_episodes: int,
-    rng: jax.Array,
-    reset: Callable[..., Any] | None = None,
-    reset_args: tuple = (),
-    extra: Callable[[Any], dict[str, jax.Array]] | None = None,
-) -> dict[str, np.ndarray]:
-    """Run ``num_episodes`` whole episodes of ``single`` (no restarts) under ``policy``.
-
-    Args:
-      reset: (keys (num_episodes, 2), *reset_args) -> batched initial ``State``; default
-        ``single.reset`` vmapped. Robustness sweeps pass ``single.reset_with`` vmapped and
-        the target's tilts and speeds as ``reset_args`` (data: one compile for all).
-      extra: single ``State`` -> {name: array}, recorded at every step as ``name``
-        (T+1, n, ...) beside the rest (e.g. hand points for the naturalness metrics).
-
-    Returns reward (T, n) and success (T, n), T the episode length; for the hand
-    environments also contacts (T, n, 15), the sensor readings, qpos (T+1, n, nq),
-    mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering, and
-    the last step's ``pose/<name>`` metrics (n,).
-    """
-    reset, step, per_state = compiled_rollout(single, policy, reset, extra)
-    state = reset(jax.random.split(rng, num_episodes), *reset_args)
-    sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
-    has_contacts = all(k in state.metrics for k in sensors)
-    record = {key: [] for key in ("reward", "success", "contacts")}
-
-    def keep(state):  # host copies only: whole mjx.Data per step would pile up on device
-        for key, value in per_state(state).items():
-            record.setdefault(key, []).append(np.asarray(value))
-
-    keep(state)
-    for _ in range(single.episode_length):
-        state = step(state)
-        keep(state)
-        record["reward"].append(np.asarray(state.reward))
-        record["success"].append(np.asarray(state.info["success"]))
-        if has_contacts:
-            record["contacts"].append(np.stack([np.asarray(state.metrics[k]) for k in sensors], -1))
-    out = {key: np.stack(values) for key, values in record.items() if values}
-    # The last step's pose metrics (n,): the final pose errors of the result schema.
-    out |= {
-        k: np.asarray(v) for k, v in state.metrics.items() if k.startswith(contract.POSE_PREFIX)
-    }
-    return out
-
-
-def summarize(single, trajectory: dict[str, np.ndarray]) -> tuple[dict, dict | None]:
-    """(metrics, contact profile or None) of a :func:`rollout`: the training's evaluation
-    metrics (:func:`contract.evaluation_metrics`: success at some step and at the last
-    step, mean return, final pose errors) and, for the hand environments,
-    :func:`contact_profile.summarize` of the sensor readings."""
-    final = {k: v for k, v in trajectory.items() if k.startswith(contract.POSE_PREFIX)}
-    arrays = contract.evaluation_metrics(
-        trajectory["reward"], (trajectory["success"] > 0.5).astype(np.float32), final
-    )
-    metrics = {k: float(v) for k, v in arrays.items()}
-    if "contacts" not in trajectory:
-        return metrics, None
-    groups = np.asarray(single.params.success_groups[0])
-    return metrics, contact_profile.summarize(trajectory["contacts"], groups)
+    act, learner, epoch = algo.load_policy(ckpt_dir, step, verified=True)
+    return LoadedPolicy(act, learner, config, single, epoch)
 
 
 VIDEO_KEYS = ("qpos", "mocap_pos", "mocap_quat")
@@ -242,9 +220,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         if args.best and args.step is not None:
             raise ValueError("--best and --step both pick the checkpoint; give one of them")
-        algo, learner, config, single, epoch = load_policy(
-            run_dir, args.step, args.episodes, args.best
-        )
+        loaded = load_policy(run_dir, args.step, args.episodes, args.best)
+        config, single, epoch = loaded.config, loaded.single, loaded.epoch
         _check_video_size(single.mj_model, args)
         if args.physics != "run":
             from mjx_hands import env as env_lib
@@ -256,10 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
 
-    def policy(obs):
-        return algo.policy(learner, obs)
-
-    trajectory = rollout(single, policy, args.episodes, jax.random.PRNGKey(args.seed))
+    trajectory = rollout(single, loaded.act, episode_keys(args.seed, args.episodes))
     metrics, profile = summarize(single, trajectory)
     summary = {
         "run_dir": str(run_dir),

@@ -33,7 +33,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tyro
 
-from mjx_hands import train_cli, training
+from mjx_hands import cli, train_cli, training
 
 VARIANTS: dict[str, tuple[str, bool]] = {
     "full": ("full", True),
@@ -787,19 +787,9 @@ USAGE = """usage: python -m mjx_hands.experiments {run,report,compare} [--help] 
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    commands = {"run": run_main, "report": report_main, "compare": compare_main}
-    if not argv or argv[0] not in commands:
-        if argv and argv[0] in ("-h", "--help"):
-            print(USAGE)
-            return 0
-        print(USAGE, file=sys.stderr)
-        print(
-            f"error: expected a command, run, report or compare; got {argv[:1] or 'none'}",
-            file=sys.stderr,
-        )
-        return 2
-    return commands[argv[0]](argv[1:])
+    return cli.dispatch(
+        argv, {"run": run_main, "report": report_main, "compare": compare_main}, USAGE
+    )
 
 
 if __name__ == "__main__":

@@ -35,11 +35,10 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
-import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate, experiments
+from mjx_hands import checkpoint, evaluate, experiments, rollouts
 
 METRICS = ("dtw", "jerk", "path_ratio", "final_pose_error")
 """Per-episode metrics; lower is more natural (closer to the demonstrations) for all."""
@@ -141,7 +140,7 @@ def policy_metrics(single, policy, episodes: int, seed: int) -> dict[str, float]
             "start": ep.start_step,
         }
 
-    trajectory = evaluate.rollout(single, policy, episodes, jax.random.PRNGKey(seed), extra=extra)
+    trajectory = rollouts.rollout(single, policy, rollouts.episode_keys(seed, episodes), extra=extra)
     dt = single.config.control_dt
     demos = [demo_at_control_rate(d.actor_points, d.fps, dt) for d in single.demos]
     contact_end = [math.floor(d.contact_end / d.fps / dt) for d in single.demos]
@@ -269,15 +268,12 @@ def main(argv: list[str] | None = None) -> int:
     per_policy = []
     for entry in policies:
         try:
-            algo, learner, config, single, epoch = evaluate.load_policy(
-                entry["run_dir"], eval_envs=args.episodes, best=args.best
-            )
+            loaded = evaluate.load_policy(entry["run_dir"], eval_envs=args.episodes, best=args.best)
         except (checkpoint.CheckpointError, ValueError, FileNotFoundError) as err:
             print(f"error: {entry['run_dir']}: {err}", file=sys.stderr)
             return 2
-        metrics = policy_metrics(
-            single, lambda obs, a=algo, p=learner: a.policy(p, obs), args.episodes, args.seed
-        )
+        config, single, epoch = loaded.config, loaded.single, loaded.epoch
+        metrics = policy_metrics(single, loaded.act, args.episodes, args.seed)
         per_policy.append(
             {
                 "task": config.task,

@@ -35,7 +35,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate
+from mjx_hands import checkpoint, evaluate, rollouts
 from mjx_hands import env as env_lib
 
 ORIENTATION_FILE = "robustness_orientation"
@@ -137,19 +137,18 @@ def run_episodes(
     flat_keys, flat_tilts, flat_speeds = map(pad_rows, (flat_keys, flat_tilts, flat_speeds))
 
     if speeds is None:
-        reset = jax.vmap(lambda _, key, tilt, speed: env.reset_with(key, tilt))
+        reset = jax.vmap(lambda key, tilt, speed: env.reset_with(key, tilt))
     else:
-        reset = jax.vmap(lambda _, key, tilt, speed: env.reset_with(key, tilt, speed))
+        reset = jax.vmap(env.reset_with)
     final, reached = [], []
     for start in range(0, total + pad, size):
         part = slice(start, start + size)
-        trajectory = evaluate.rollout(
+        trajectory = rollouts.rollout(
             env,
             policy,
-            size,
-            jax.random.PRNGKey(0),  # unused: the keys come in reset_args
+            flat_keys[part],
             reset=reset,
-            reset_args=(flat_keys[part], flat_tilts[part], flat_speeds[part]),
+            reset_args=(flat_tilts[part], flat_speeds[part]),
         )
         success = trajectory["success"] > 0.5  # (T, size)
         final.append(success[-1])
@@ -273,10 +272,8 @@ def load_runs(args: RobustnessArgs) -> list[tuple]:
     """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
     loaded = []
     for run_dir in args.run_dirs:
-        algo, learner, _config, single, epoch = evaluate.load_policy(
-            Path(run_dir), eval_envs=args.chunk, best=args.best
-        )
-        loaded.append((run_dir, lambda obs, a=algo, p=learner: a.policy(p, obs), single, epoch))
+        policy = evaluate.load_policy(Path(run_dir), eval_envs=args.chunk, best=args.best)
+        loaded.append((run_dir, policy.act, policy.single, policy.epoch))
     tasks = {single.config.task for _, _, single, _ in loaded}
     if len(tasks) > 1:
         raise ValueError(f"the runs are of different tasks {sorted(tasks)}; give runs of one task")

@@ -506,11 +506,14 @@ class RunDirectory:
             return "no checkpoint was saved yet"
         return f"the last checkpoint (epoch {self.last_saved}) is in {self.checkpoints}"
 
-    def restore(self, algo: DDPG, like: TrainerState, index: int, epoch: int) -> dict[str, Any]:
+    def restore(
+        self, algo: DDPG, like: TrainerState, index: int, epoch: int, verified: bool = False
+    ) -> dict[str, Any]:
         """Member ``index``'s checkpoint tree of ``epoch`` (``algo``'s layout, shaped like
-        ``like``'s)."""
+        ``like``'s). ``verified``: :meth:`latest_epoch` returned ``epoch``, so its digest
+        was checked (hashing reads every byte of the step: a replay buffer is GBs)."""
         num_devices = algo.num_devices
-        meta = checkpoint.read_metadata(self.checkpoints, epoch)
+        meta = checkpoint.read_metadata(self.checkpoints, epoch, verified=verified)
         saved_devices = int(meta.get("num_devices", 1))
         if saved_devices != num_devices:
             raise checkpoint.CheckpointError(
@@ -524,7 +527,7 @@ class RunDirectory:
             self.checkpoints,
             algo.checkpoint_tree(like, saved_replay, index),
             epoch,
-            verified=True,  # read_metadata above checked the step's digest
+            verified=True,  # checked by read_metadata above or by latest_epoch
         )
         return tree
 
@@ -753,7 +756,10 @@ def run_population(
         for r in runs:  # ... whose newer checkpoints the resumed run will write again
             checkpoint.discard_after(r.checkpoints, start_epoch)
             checkpoint.discard_after(r.best_dir, start_epoch)
-        trees = [r.restore(algo, state, i, start_epoch) for i, r in enumerate(runs)]
+        trees = [
+            r.restore(algo, state, i, start_epoch, verified=s == start_epoch)
+            for i, (r, s) in enumerate(zip(runs, saved, strict=True))
+        ]
         state = algo.from_checkpoint_trees(trees, state)
         print(f"resumed from epoch {start_epoch}", file=out, flush=True)
     for r in runs:

@@ -256,41 +256,22 @@ def test_store_takes_concurrent_answers(tmp_path):
 
 # ---------------------------------------------------------------- statistics
 def t_p_by_integration(t: float, df: int) -> float:
-    """Two-sided p of Student's t by integrating its density (independent of betainc)."""
+    """Two-sided p of Student's t by integrating its density (independent of scipy)."""
     x = np.linspace(0.0, abs(t), 200_001)
     log_c = math.lgamma((df + 1) / 2) - math.lgamma(df / 2) - 0.5 * math.log(df * math.pi)
     pdf = np.exp(log_c - (df + 1) / 2 * np.log1p(x * x / df))
     return 1.0 - 2.0 * float(np.trapezoid(pdf, x))
 
 
-def test_betainc_closed_forms():
-    for x in (0.0, 0.1, 0.5, 0.93, 1.0):
-        assert report.betainc(1, 1, x) == pytest.approx(x, abs=1e-14)
-        assert report.betainc(3.5, 1, x) == pytest.approx(x**3.5, abs=1e-13)
-        assert report.betainc(1, 2.5, x) == pytest.approx(1 - (1 - x) ** 2.5, abs=1e-13)
-        # Symmetry I_x(a, b) = 1 - I_{1-x}(b, a).
-        assert report.betainc(2.3, 7.1, x) == pytest.approx(1 - report.betainc(7.1, 2.3, 1 - x))
-    with pytest.raises(ValueError, match="betainc needs"):
-        report.betainc(0, 1, 0.5)
-
-
-def test_t_test_against_known_values_and_integration():
-    assert report.t_two_sided_p(1.0, 1) == pytest.approx(0.5, abs=1e-12)  # Cauchy quartiles
-    for t in (0.3, 1.0, 2.5, 7.0):  # df = 2: p = 1 - t / sqrt(2 + t^2)
-        assert report.t_two_sided_p(t, 2) == pytest.approx(1 - t / math.sqrt(2 + t * t), abs=1e-12)
-    assert report.t_two_sided_p(2.228138852, 10) == pytest.approx(0.05, abs=1e-8)  # t table
-    assert report.t_two_sided_p(-2.228138852, 10) == pytest.approx(0.05, abs=1e-8)
-    assert report.t_two_sided_p(2.7874, 4) == pytest.approx(0.0495, abs=2e-4)
-    for t, df in ((0.5, 3), (2.0, 9), (4.2, 29), (1.3, 200)):
-        assert report.t_two_sided_p(t, df) == pytest.approx(t_p_by_integration(t, df), abs=1e-8)
-
-    sample = [2, 1, 1, 0, 2, -1, 1, 2]
-    x = np.asarray(sample, float)
-    t_hand = x.mean() / (x.std(ddof=1) / math.sqrt(len(x)))
-    t, p = report.one_sample_t_test(sample)
-    assert t == pytest.approx(t_hand) and p == pytest.approx(
-        t_p_by_integration(t_hand, 7), abs=1e-8
-    )
+def test_t_test_against_a_hand_computed_t_and_integration():
+    """The one-sample t-test against the formula and its density integrated (scipy's
+    implementation is what the report uses; the edge cases are the report's own)."""
+    for sample in ([2, 1, 1, 0, 2, -1, 1, 2], [-2, -1, 0, -1, 1, -2, -2, 0, -1, -1, 2]):
+        x = np.asarray(sample, float)
+        t_hand = x.mean() / (x.std(ddof=1) / math.sqrt(len(x)))
+        t, p = report.one_sample_t_test(sample)
+        assert t == pytest.approx(t_hand)
+        assert p == pytest.approx(t_p_by_integration(t_hand, len(x) - 1), abs=1e-8)
     assert report.one_sample_t_test([1, 1, 1]) == (math.inf, 0.0)
     assert report.one_sample_t_test([0, 0]) == (0.0, 1.0)
     assert all(math.isnan(v) for v in report.one_sample_t_test([2]))

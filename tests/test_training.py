@@ -407,8 +407,9 @@ def test_evaluate_loads_the_best_policy_without_compiling(hand_run):
     assert result.returncode == 0
     with open(run_dir / "metrics.csv") as f:
         rows = [r for r in csv.DictReader(f)]
-    _, best, _, _, epoch = evaluate.load_policy(run_dir, best=True, eval_envs=8)
-    _, latest, _, _, _ = evaluate.load_policy(run_dir, eval_envs=8)
+    best_policy = evaluate.load_policy(run_dir, best=True, eval_envs=8)
+    best, epoch = best_policy.params, best_policy.epoch
+    latest = evaluate.load_policy(run_dir, eval_envs=8).params
     assert int(best.updates) == float(rows[epoch - 1]["train/updates"])
     if epoch == 2:  # the best is the latest: the very same networks
         for x, y in zip(jax.tree.leaves(best), jax.tree.leaves(latest)):
@@ -513,9 +514,21 @@ def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
     summary = brax_agents.run(config, out=io.StringIO(), env_factory=point_factory)
     assert 0.0 <= summary["final_eval"]["eval/success"] <= 1.0
     assert np.isfinite(summary["final_eval"]["eval/episode_return"])
-    assert (run_dir / "brax_params.pkl").stat().st_size > 0
+    assert (run_dir / brax_agents.PARAMS_FILE).stat().st_size > 0
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert len(rows) >= 3 and "eval/episode_reward" in rows[0]
+    # Loaded back by its own learner (networks rebuilt, not Brax's inference function
+    # from training): the same episodes give the training's final evaluation exactly.
+    from mjx_hands import evaluate, rollouts
+
+    loaded = evaluate.load_policy(run_dir, eval_envs=config.eval_envs, env_factory=point_factory)
+    assert loaded.config.algo == algo and loaded.epoch == config.epochs
+    keys = rollouts.episode_keys(config.seed + 1, config.eval_envs)
+    trajectory = rollouts.rollout(loaded.single, loaded.act, keys)
+    metrics, _ = rollouts.summarize(loaded.single, trajectory)
+    assert metrics == pytest.approx(summary["final_eval"], rel=1e-6)
+    with pytest.raises(ValueError, match="keeps only its final parameters"):
+        evaluate.load_policy(run_dir, best=True, env_factory=point_factory)
 
 
 def test_checkpoint_round_trips_empty_and_nested_arrays(tmp_path):

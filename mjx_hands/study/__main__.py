@@ -10,11 +10,12 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import sys
 from typing import Annotated
 
 import tyro
+
+from mjx_hands import cli
 
 USAGE = __doc__
 
@@ -72,17 +73,8 @@ def report_main(argv: list[str]) -> int:
 
 
 def make_main(argv: list[str]) -> int:
-    # Imported only when asked for: rendering needs the simulator and trained policies.
-    try:
-        make = importlib.import_module("mjx_hands.study.make")
-    except ModuleNotFoundError as err:
-        if err.name != "mjx_hands.study.make":
-            raise
-        print(
-            "error: the make command is not available (mjx_hands/study/make.py missing)",
-            file=sys.stderr,
-        )
-        return 2
+    from mjx_hands.study import make  # rendering needs the simulator: only when asked for
+
     return make.main(argv)
 
 
@@ -90,18 +82,7 @@ COMMANDS = {"make": make_main, "serve": serve_main, "report": report_main}
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] not in COMMANDS:
-        if argv and argv[0] in ("-h", "--help"):
-            print(USAGE)
-            return 0
-        print(USAGE, file=sys.stderr)
-        print(
-            f"error: expected a command, make, serve or report; got {argv[0] if argv else 'none'}",
-            file=sys.stderr,
-        )
-        return 2
-    return COMMANDS[argv[0]](argv[1:])
+    return cli.dispatch(argv, COMMANDS, USAGE)
 
 
 if __name__ == "__main__":

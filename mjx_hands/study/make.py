@@ -26,7 +26,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate
+from mjx_hands import checkpoint, evaluate, rollouts
 from mjx_hands import env as env_lib
 from mjx_hands.study import layout
 
@@ -90,7 +90,7 @@ def episodes_of(
             single.config, start_position_noise=far[0], start_joint_noise=far[1]
         )
         single = env_lib.HandInteractionEnv(config)
-    return single, evaluate.rollout(single, policy, count, key)
+    return single, rollouts.rollout(single, policy, jax.random.split(key, count))
 
 
 def make(args: MakeArgs, log=sys.stdout) -> layout.Study:
@@ -103,10 +103,8 @@ def make(args: MakeArgs, log=sys.stdout) -> layout.Study:
     for index in range(0, len(args.runs), 2):
         loaded = {}
         for policy_name, run_dir in zip(layout.POLICIES, args.runs[index : index + 2]):
-            algo, learner, config, single, _epoch = evaluate.load_policy(
-                Path(run_dir), eval_envs=1, best=args.best
-            )
-            loaded[policy_name] = (config, single, lambda o, a=algo, p=learner: a.policy(p, o))
+            policy = evaluate.load_policy(Path(run_dir), eval_envs=1, best=args.best)
+            loaded[policy_name] = (policy.config, policy.single, policy.act)
         tasks = {config.task for config, _, _ in loaded.values()}
         if len(tasks) > 1:
             raise ValueError(f"--runs {args.runs[index : index + 2]} are of different tasks")

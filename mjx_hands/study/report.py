@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from scipy import stats
 
 from mjx_hands.study import layout, store
 
@@ -51,53 +52,6 @@ class Rating(NamedTuple):
 
 
 # ----------------------------------------------------------------- statistics
-def _beta_continued_fraction(a: float, b: float, x: float) -> float:
-    """Continued fraction of the incomplete beta function (modified Lentz's method)."""
-    tiny = 1e-300
-    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 1000):
-        m2 = 2 * m
-        for coefficient in (
-            m * (b - m) * x / ((a - 1.0 + m2) * (a + m2)),
-            -(a + m) * (a + b + m) * x / ((a + m2) * (a + 1.0 + m2)),
-        ):
-            d = 1.0 + coefficient * d
-            d = 1.0 / (d if abs(d) > tiny else tiny)
-            c = 1.0 + coefficient / c
-            c = c if abs(c) > tiny else tiny
-            h *= d * c
-        if abs(d * c - 1.0) < 1e-15:
-            return h
-    raise ArithmeticError(f"incomplete beta I_{x}({a}, {b}) did not converge")
-
-
-def betainc(a: float, b: float, x: float) -> float:
-    """Regularised incomplete beta function I_x(a, b) for a, b > 0 and 0 <= x <= 1."""
-    if not (a > 0 and b > 0 and 0.0 <= x <= 1.0):
-        raise ValueError(f"betainc needs a, b > 0 and 0 <= x <= 1, got a={a}, b={b}, x={x}")
-    if x in (0.0, 1.0):
-        return x
-    log_front = (
-        math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
-    )
-    front = math.exp(log_front)
-    # The fraction converges fast on this side of the mean; use the symmetry otherwise.
-    if x < (a + 1.0) / (a + b + 2.0):
-        return front * _beta_continued_fraction(a, b, x) / a
-    return 1.0 - front * _beta_continued_fraction(b, a, 1.0 - x) / b
-
-
-def t_two_sided_p(t: float, df: float) -> float:
-    """P(|T| >= |t|) for Student's t with ``df`` degrees of freedom."""
-    if math.isnan(t) or not df > 0:
-        return math.nan
-    if math.isinf(t):
-        return 0.0
-    return betainc(df / 2.0, 0.5, df / (df + t * t))
-
-
 def one_sample_t_test(values: Sequence[float], mu: float = 0.0) -> tuple[float, float]:
     """Two-sided one-sample t-test of mean(values) == mu: (t, p), df = n - 1.
 
@@ -111,8 +65,8 @@ def one_sample_t_test(values: Sequence[float], mu: float = 0.0) -> tuple[float, 
     sd = float(x.std(ddof=1))
     if sd == 0.0:
         return (0.0, 1.0) if diff == 0.0 else (math.copysign(math.inf, diff), 0.0)
-    t = diff / (sd / math.sqrt(x.size))
-    return t, t_two_sided_p(t, x.size - 1)
+    result = stats.ttest_1samp(x, mu)
+    return float(result.statistic), float(result.pvalue)
 
 
 def sign_test(values: Sequence[float]) -> float:
@@ -124,8 +78,7 @@ def sign_test(values: Sequence[float]) -> float:
     m = positive + negative
     if m == 0:
         return 1.0
-    tail = sum(math.comb(m, i) for i in range(min(positive, negative) + 1))
-    return min(1.0, 2.0 * tail / 2.0**m)
+    return float(stats.binomtest(positive, m, 0.5).pvalue)
 
 
 # --------------------------------------------------------------------- table

@@ -34,7 +34,7 @@ import numpy as np
 import optax
 from flax import struct
 
-from mjx_hands import contract
+from mjx_hands import checkpoint, contract
 from mjx_hands.agents.ddpg import losses, networks, replay
 
 AXIS = "devices"
@@ -376,6 +376,18 @@ class DDPG:
         """What a policy needs (the learner: networks, targets, normaliser); no env or
         buffer."""
         return {"learner": jax.tree.map(_first_device, member(state, index).learner)}
+
+    def load_policy(self, ckpt_dir, step: int, verified: bool = False):
+        """(act, learner, epoch) of the policy a checkpoint folder (a run's ``checkpoints``
+        or ``best``) holds at ``step``: ``act`` = :meth:`policy` bound to that learner.
+        Only the learner is read (by path), so checkpoints whose environment state has
+        another layout still load; ``verified``: its digest was already checked."""
+        like = jax.eval_shape(self.init, jax.random.PRNGKey(0))  # structure only, no compile
+        tree, meta = checkpoint.restore(
+            ckpt_dir, self.policy_tree(like), step, partial=True, verified=verified
+        )
+        learner = tree["learner"]
+        return functools.partial(self.policy, learner), learner, int(meta["epoch"])
 
     def from_checkpoint_trees(
         self, trees: list[dict[str, Any]], fresh: TrainerState
