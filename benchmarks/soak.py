@@ -24,7 +24,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from mjx_hands import training
+from mjx_hands import train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
 from mjx_hands.point_reach import PointReach
@@ -40,7 +40,7 @@ DDPG = DDPGConfig(
 )
 
 
-def point_reach(config: training.TrainConfig, num_devices: int):
+def point_reach(config: train_config.TrainConfig, num_devices: int):
     single = PointReach()
     return (
         BatchedEnv(single, config.num_envs // num_devices),
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results_soak_cpu.json"))
     args = parser.parse_args(argv)
     run_dir = Path(tempfile.mkdtemp(prefix="soak-")) / "run"
-    config = training.TrainConfig(
+    config = train_config.TrainConfig(
         num_envs=args.num_envs,
         eval_envs=args.num_envs,
         epochs=args.epochs,
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": f"{platform.processor() or platform.machine()}, {jax.device_count()} "
         f"{jax.default_backend()} device(s), {len(__import__('os').sched_getaffinity(0))} cores",
         "versions": {"jax": jax.__version__, "python": platform.python_version()},
-        "config": training.config_to_json(dataclasses.replace(config, run_dir=None)),
+        "config": train_config.config_to_json(dataclasses.replace(config, run_dir=None)),
         "wall_seconds": time.perf_counter() - started,
         "stop_reason": summary["stop_reason"],
         "summary": summarize(rows, args.warmup),

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import functools
 import json
-import sys
 import time
 from typing import Any
 
@@ -137,7 +136,7 @@ def _deterministic(make_policy, params):
     return lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
 
 
-def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+def run(config, out=None, env_factory=None) -> dict[str, Any]:
     """Train Brax's SAC or PPO (``config.algo``) on the task; the run directory holds
     config.json, metrics.csv, success.png and the parameters (no checkpoint to resume).
 
@@ -147,9 +146,9 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     from brax.training.agents.ppo import train as ppo
     from brax.training.agents.sac import train as sac
 
-    from mjx_hands import training
+    from mjx_hands import run_directory, train_config, training
 
-    run_dir = training.run_directory(config)
+    run_dir = train_config.run_dir_path(config)
     if config.algo not in ALGOS:
         raise ValueError(f"brax_agents.run trains sac or ppo, not {config.algo!r}")
     if config.resume:
@@ -162,14 +161,14 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
             f"{run_dir} already holds a run; choose another --run-dir for --algo {config.algo}"
         )
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(json.dumps(training.config_to_json(config), indent=2))
+    (run_dir / "config.json").write_text(json.dumps(train_config.config_to_json(config), indent=2))
     _, _, single = (env_factory or training.make_envs)(config, 1)
     episode_length = single.episode_length
     ddpg = config.ddpg
     num_timesteps = config.epochs * config.num_envs * ddpg.unroll_length * ddpg.iterations_per_epoch
     num_evals = max(2, config.epochs // config.eval_every + 1)
     gamma = ddpg.discount if ddpg.discount is not None else 1.0 - 1.0 / episode_length
-    log = training.MetricsLog(run_dir)
+    log = run_directory.MetricsLog(run_dir)
     started = time.perf_counter()
 
     def progress(steps: int, metrics: dict[str, Any]) -> None:
@@ -229,7 +228,7 @@ def run(config, out=sys.stdout, env_factory=None) -> dict[str, Any]:
     final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()
-    training.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
+    run_directory.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
     print(
         f"{config.algo}: success at the end {final['eval/success_final']:.2f} "
         f"(some step {final['eval/success']:.2f})",

@@ -25,7 +25,14 @@ from typing import Annotated, Any, Literal
 import jax
 import tyro
 
-from mjx_hands import brax_agents, checkpoint, contact_profile, training
+from mjx_hands import (
+    brax_agents,
+    checkpoint,
+    contact_profile,
+    run_directory,
+    train_config,
+    training,
+)
 from mjx_hands.rollouts import episode_keys, rollout, summarize
 
 
@@ -69,7 +76,7 @@ class LoadedPolicy:
     :func:`mjx_hands.rollouts.rollout` compiles it once)."""
     params: Any
     """The learner's own parameters (DDPG: its ``LearnerState``; Brax: its params)."""
-    config: training.TrainConfig
+    config: train_config.TrainConfig
     """The run's config, with the evaluation batch asked for."""
     single: Any
     """The run's single (unbatched) environment."""
@@ -78,7 +85,7 @@ class LoadedPolicy:
 
 
 def _checkpoint_dir(run_dir: Path, best: bool) -> Path:
-    ckpt_dir = run_dir / (training.BEST_DIR if best else "checkpoints")
+    ckpt_dir = run_dir / (run_directory.BEST_DIR if best else "checkpoints")
     if not best and not ckpt_dir.is_dir():
         raise checkpoint.CheckpointError(
             f"{run_dir} holds no trained policy ({ckpt_dir.name}/ missing): give a folder "
@@ -102,7 +109,7 @@ def _checkpointed_learner(
     ckpt_dir = _checkpoint_dir(run_dir, best)
     step = checkpoint.resolve_step(ckpt_dir, step)  # the newest intact one when None
     meta = checkpoint.read_metadata(ckpt_dir, step, verified=True)
-    config = dataclasses.replace(training.config_from_json(meta["config"]), resume=False)
+    config = dataclasses.replace(train_config.config_from_json(meta["config"]), resume=False)
     if eval_envs is not None:
         config = dataclasses.replace(config, eval_envs=eval_envs)
     num_devices = int(meta.get("num_devices", 1))
@@ -136,7 +143,7 @@ def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = 
 def run_algo(run_dir: Path) -> str:
     """The learner that trained a run (its config.json's ``algo``; DDPG without one)."""
     path = Path(run_dir) / "config.json"
-    return training.read_config_json(path).get("algo", "ddpg") if path.is_file() else "ddpg"
+    return train_config.read_config_json(path).get("algo", "ddpg") if path.is_file() else "ddpg"
 
 
 def load_policy(
@@ -161,7 +168,9 @@ def load_policy(
                 f"{run_dir} was trained by Brax's {algo_name}, which keeps only its final "
                 "parameters: --step and --best choose among DDPG's checkpoints"
             )
-        config = training.config_from_json(training.read_config_json(run_dir / "config.json"))
+        config = train_config.config_from_json(
+            train_config.read_config_json(run_dir / "config.json")
+        )
         config = dataclasses.replace(config, eval_envs=eval_envs, resume=False)
         _, _, single = (env_factory or training.make_envs)(config, 1)
         act, params = brax_agents.load_policy(run_dir, config, single)

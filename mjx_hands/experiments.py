@@ -33,7 +33,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tyro
 
-from mjx_hands import cli, train_cli, training
+from mjx_hands import cli, run_directory, train_cli, train_config, training
 
 VARIANTS: dict[str, tuple[str, bool]] = {
     "full": ("full", True),
@@ -66,7 +66,7 @@ class GridConfig:
     """Reward variants of the grid."""
     seeds: int = 5
     """Seeds per variant: --seed, --seed + 1, ..."""
-    train: Annotated[training.TrainConfig, tyro.conf.arg(name="")] = training.TrainConfig()
+    train: Annotated[train_config.TrainConfig, tyro.conf.arg(name="")] = train_config.TrainConfig()
     """Everything else, as train.py takes it."""
 
 
@@ -119,14 +119,14 @@ def _grid_default(argv: list[str]) -> GridConfig:
             )
         try:
             saved = json.loads(path.read_text())
-            train = dataclasses.replace(training.config_from_json(saved["train"]), resume=False)
+            train = dataclasses.replace(train_config.config_from_json(saved["train"]), resume=False)
             return GridConfig(variants=tuple(saved["variants"]), seeds=saved["seeds"], train=train)
         except (json.JSONDecodeError, KeyError, TypeError) as err:
             raise ValueError(f"{path} is not a grid record this version reads: {err!r}") from err
-    return GridConfig(train=training.preset(train_cli.option(argv, "--preset") or "auto"))
+    return GridConfig(train=train_config.preset(train_cli.option(argv, "--preset") or "auto"))
 
 
-def run_grid(grid: GridConfig, out=sys.stdout, env_factory=None) -> list[dict[str, Any]]:
+def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any]]:
     """Train ``grid``; returns each member's summary (with its ``variant``)."""
     _check_grid(grid)
     pairs = members(grid)
@@ -139,7 +139,7 @@ def run_grid(grid: GridConfig, out=sys.stdout, env_factory=None) -> list[dict[st
             {"variant": v, "seed": c.seed, "run_dir": str(Path(c.run_dir).relative_to(run_dir))}
             for v, c in pairs
         ],
-        "train": training.config_to_json(dataclasses.replace(grid.train, resume=False)),
+        "train": train_config.config_to_json(dataclasses.replace(grid.train, resume=False)),
     }
     if grid.train.resume:
         saved = json.loads((run_dir / GRID_FILE).read_text())
@@ -163,7 +163,7 @@ def run_grid(grid: GridConfig, out=sys.stdout, env_factory=None) -> list[dict[st
     configs = [c for _, c in pairs]
     # Refusals (existing runs, resume mismatches) come before anything is written.
     for config in configs:
-        training.RunDirectory(config).check()
+        run_directory.RunDirectory(config).check()
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / GRID_FILE).write_text(json.dumps(record, indent=2))
     labels = [v for v, _ in pairs]

@@ -160,7 +160,7 @@ def run_episodes(
     }
 
 
-def orientation_sweep(env, policy, args: RobustnessArgs, log=sys.stdout) -> dict:
+def orientation_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     """Success per (pitch, yaw) cell of one policy: arrays (n_pitch, n_yaw)."""
     angles = angle_grid(args.max_angle_deg, args.angle_step_deg)
     yaw, pitch = np.meshgrid(np.radians(angles), np.radians(angles))  # rows: pitch
@@ -175,7 +175,7 @@ def orientation_sweep(env, policy, args: RobustnessArgs, log=sys.stdout) -> dict
     return {k: v.mean(axis=1).reshape(shape) for k, v in result.items()}
 
 
-def motion_sweep(env, policy, args: RobustnessArgs, log=sys.stdout) -> dict:
+def motion_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     """Success per speed of one policy: arrays (n_speeds,)."""
     moving = env_lib.HandInteractionEnv(
         dataclasses.replace(

@@ -33,29 +33,29 @@ def default_config(argv: list[str]):
     import dataclasses
     from pathlib import Path
 
-    from mjx_hands import training
+    from mjx_hands import train_config
 
     run_dir = option(argv, "--run-dir") or option(argv, "--run_dir")
     if "--resume" in argv and run_dir and (Path(run_dir) / "config.json").is_file():
-        saved = training.read_config_json(Path(run_dir) / "config.json")
+        saved = train_config.read_config_json(Path(run_dir) / "config.json")
         try:
-            config = training.config_from_json(saved)
+            config = train_config.config_from_json(saved)
         except TypeError as err:  # a key this version does not know
             raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
         return dataclasses.replace(config, resume=False)
-    return training.preset(option(argv, "--preset") or "auto")
+    return train_config.preset(option(argv, "--preset") or "auto")
 
 
 def main(argv: list[str] | None = None) -> int:
     import tyro
 
-    from mjx_hands import checkpoint, training
+    from mjx_hands import checkpoint, train_config, training
     from mjx_hands.mocap import MocapError
 
     argv = sys.argv[1:] if argv is None else argv
     try:
         default = default_config(argv)
-        config = tyro.cli(training.TrainConfig, default=default, args=argv, description=USAGE)
+        config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
         if config.algo == "ddpg":
             summary = training.run(config)
         else:

@@ -1,19 +1,13 @@
-"""The training run behind ``train.py``: config, presets, loop, logs, checkpoints.
-
-The Python loop only calls the compiled epoch, evaluates, logs and checkpoints
-(:mod:`mjx_hands.agents.ddpg`). A run directory holds ``config.json``,
-``metrics.csv`` (one row per epoch; evaluation columns filled every ``eval_every``
-epochs), TensorBoard event files, ``checkpoints/`` (Orbax; the latest few, to
-resume from), ``best/`` (the policy of the best evaluation so far) and ``success.png``.
+"""The training loop behind ``train.py``: builds the environment and the learner of a
+config (:mod:`mjx_hands.train_config`), then only calls the compiled epoch, evaluates,
+logs and checkpoints into run directories (:mod:`mjx_hands.run_directory`), stopping on
+the budget, a signal or divergence.
 """
 
 from __future__ import annotations
 
 import contextlib
-import csv
-import dataclasses
 import functools
-import json
 import math
 import os
 import resource
@@ -21,164 +15,16 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import jax
 import numpy as np
 
-from mjx_hands import checkpoint, tasks
-from mjx_hands.agents.ddpg import DDPG, DDPGConfig, TrainerState
-
-Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainConfig:
-    """Train a hand-interaction policy with DDPG (or Brax's SAC/PPO for comparison)."""
-
-    task: Task = "handshake"
-    """Interaction to learn."""
-    reward: Literal["full", "baseline1", "baseline2"] = "full"
-    """Reward: the paper's full reward, baseline1 (palm position only), baseline2
-    (no contact term)."""
-    imitation: bool = True
-    """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
-    mocap: str | None = None
-    """Folder of demonstrations; default: the authors' recordings in
-    ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
-    mocap_source: Literal["auto", "optitrack", "synthetic"] = "auto"
-    """Which demonstrations to read."""
-    demos: Literal["authors", "all"] = "authors"
-    """Of the recordings, the demonstrations the authors trained on, or all of them."""
-    target_rotation_noise: float = 0.0
-    """Std (radians) of a random per-episode rotation of the target hand."""
-    physics: Literal["auto", "mjx", "native"] = "auto"
-    """Physics: MJX (accelerators), native C MuJoCo on every CPU core (>10x MJX's speed
-    there) or auto (native on CPUs, MJX elsewhere)."""
-    algo: Literal["ddpg", "sac", "ppo"] = "ddpg"
-    """Learner: DDPG (the paper's) or Brax's SAC / PPO on the same environment."""
-    preset: Literal["auto", "cpu", "gpu"] = "auto"
-    """Size of the run; auto picks by the device JAX finds."""
-    num_envs: int = 64
-    """Parallel environments (summed over devices)."""
-    epochs: int = 100
-    """Training epochs (see --ddpg.iterations-per-epoch etc. for an epoch's size)."""
-    max_minutes: float | None = None
-    """Stop (with a checkpoint) once training has run this long."""
-    eval_every: int = 5
-    """Evaluate (and checkpoint) every this many epochs."""
-    checkpoint_every: int = 1
-    """Also checkpoint every this many epochs (a crash loses at most these epochs; the
-    CPU preset: 5, as its replay buffer makes a checkpoint cost a third of an epoch)."""
-    checkpoint_minutes: float | None = None
-    """Also checkpoint once this many minutes have passed since the last checkpoint."""
-    eval_envs: int = 64
-    """Episodes per evaluation (summed over devices), deterministic policy."""
-    seed: int = 0
-    """Seed of networks, exploration and episode randomisation."""
-    run_dir: str | None = None
-    """Output folder; default runs/<task>-<algo>-<time>."""
-    resume: bool = False
-    """Continue the run in --run-dir from its latest checkpoint."""
-    save_replay: bool = True
-    """Include the replay buffer in checkpoints (resume then equals an uninterrupted run)."""
-    ddpg: DDPGConfig = DDPGConfig()
-    """DDPG hyperparameters."""
-    replay_ratio: float | None = None
-    """Replayed transitions per collected one (updates x batch size / env steps), held as
-    --num-envs changes: when set, it fixes --ddpg.updates-per-iteration (rounded to a
-    multiple of --ddpg.actor-update-interval, at least one). Both presets replay 25.6."""
-
-    def __post_init__(self):
-        if (
-            self.replay_ratio is not None
-            and math.isfinite(self.replay_ratio)
-            and self.replay_ratio > 0
-        ):
-            # Resolved here, so config.json records the updates the run makes.
-            object.__setattr__(
-                self, "ddpg", updates_for_ratio(self.ddpg, self.num_envs, self.replay_ratio)
-            )
-        problems = []
-        for name in ("num_envs", "epochs", "eval_every", "eval_envs", "checkpoint_every"):
-            if getattr(self, name) <= 0:
-                problems.append(
-                    f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}"
-                )
-        for name in ("max_minutes", "checkpoint_minutes"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                problems.append(
-                    f"--{name.replace('_', '-')} must be a positive number, got {value}"
-                )
-        if self.replay_ratio is not None and not (
-            math.isfinite(self.replay_ratio) and self.replay_ratio > 0
-        ):
-            problems.append(f"--replay-ratio must be a positive number, got {self.replay_ratio}")
-        if not (math.isfinite(self.target_rotation_noise) and self.target_rotation_noise >= 0):
-            problems.append(
-                f"--target-rotation-noise must be a finite number >= 0, got "
-                f"{self.target_rotation_noise}"
-            )
-        if self.mocap is not None and not Path(self.mocap).is_dir():
-            problems.append(f"--mocap {self.mocap}: no such folder")
-        if problems:
-            raise ValueError("; ".join(problems))
-
-
-def updates_for_ratio(ddpg: DDPGConfig, num_envs: int, ratio: float) -> DDPGConfig:
-    """``ddpg`` with the updates per iteration that replay ``ratio`` sampled transitions per
-    env step at ``num_envs`` envs: ratio x num_envs x unroll / batch, rounded to a multiple
-    of the actor update interval (at least one interval)."""
-    collected = num_envs * ddpg.unroll_length
-    interval = ddpg.actor_update_interval
-    updates = max(interval, interval * round(ratio * collected / ddpg.batch_size / interval))
-    return dataclasses.replace(ddpg, updates_per_iteration=updates)
-
-
-def preset(kind: str, **overrides: Any) -> TrainConfig:
-    """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs)."""
-    if kind == "auto":
-        kind = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "cpu"
-    if kind == "cpu":
-        base = TrainConfig(
-            preset="cpu",
-            num_envs=64,
-            epochs=100,  # 640 k env steps, ~45 min on 2 quiet cores (~275 env steps/s with SGD)
-            eval_envs=64,
-            # A 250 MB checkpoint (the replay buffer) takes ~2.4 s against a ~6.5 s epoch
-            # (native physics): every 5th epoch costs 7 %, every epoch 37 % (RESULTS.md).
-            checkpoint_every=5,
-            ddpg=DDPGConfig(
-                replay_capacity=200_000,
-                unroll_length=10,
-                updates_per_iteration=64,
-                iterations_per_epoch=10,
-            ),
-        )
-    elif kind == "gpu":
-        base = TrainConfig(
-            preset="gpu",
-            num_envs=4096,
-            epochs=200,
-            eval_envs=1024,
-            save_replay=False,
-            ddpg=DDPGConfig(
-                batch_size=4096,
-                replay_capacity=2_000_000,
-                min_replay_size=40_960,
-                unroll_length=5,
-                # Replay ratio 25.6 as in the CPU preset (128 x 4,096 / 20,480): the H100
-                # handshake run reached 86 % in 6.35 M steps with it; updates are cheap on a GPU.
-                updates_per_iteration=128,
-                iterations_per_epoch=10,
-            ),
-        )
-    else:
-        raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
-    return dataclasses.replace(base, **overrides)
+from mjx_hands import checkpoint
+from mjx_hands.agents.ddpg import DDPG
+from mjx_hands.run_directory import RunDirectory
+from mjx_hands.train_config import TrainConfig, check_population, program_config
 
 
 # ---------------------------------------------------------------- build
@@ -218,117 +64,35 @@ def make_learner(
     the hand environment (tests train the point-reach task through the same loop).
     ``population``: the configs of every member (``config`` is the first), each with its
     reward variant as data; None trains ``config`` alone.
+
+    A learner holds no run state, so configs that differ only in :data:`RUN_LOOP_FIELDS`
+    share one, and with it its compiled programs: a resumed or repeated run in the same
+    process compiles nothing again. (JAX's persistent cache cannot stand in: programs with
+    host callbacks, as the native physics makes, are never written to it; 3 programs of
+    ~10 s each on 2 cores for a small hand run.)
     """
+    members = tuple(program_config(c) for c in (population or [config]))
+    return _shared_learner(members, tuple(devices) if devices else None, env_factory)
+
+
+@functools.lru_cache(maxsize=4)
+def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
+    config = members[0]
     num_devices = len(devices or jax.local_devices())  # this host's share of the batch
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
-    members = population or [config]
     algo = DDPG(
         train_env,
         config.ddpg,
         episode_length=single.episode_length,
         eval_env=eval_env,
-        devices=devices,
+        devices=list(devices) if devices else None,
         members=len(members),
-        member_info=member_variants(single, members),
+        member_info=member_variants(single, list(members)),
     )
     return algo, single
 
 
-# ------------------------------------------------------------- logging
-class MetricsLog:
-    """metrics.csv + TensorBoard events in the run directory; appends on resume."""
-
-    def __init__(self, run_dir: Path):
-        self.path = run_dir / "metrics.csv"
-        self.rows: list[dict[str, float]] = []
-        if self.path.exists():
-            with self.path.open() as f:
-                self.rows = [
-                    {k: float(v) for k, v in r.items() if v not in ("", None) and k is not None}
-                    for r in csv.DictReader(f)
-                ]
-        try:
-            from tensorboardX import SummaryWriter
-
-            self.tb = SummaryWriter(str(run_dir / "tensorboard"))
-        except ImportError:  # pragma: no cover - tensorboardX is a dependency
-            self.tb = None
-
-    def append(self, row: dict[str, float]) -> None:
-        self.rows.append(row)
-        keys: list[str] = []
-        for r in self.rows:
-            keys += [k for k in r if k not in keys]
-        # Rewritten whole (columns may grow) into a temporary file, then renamed, so
-        # an interruption never leaves a truncated history.
-        tmp = self.path.with_suffix(".csv.tmp")
-        with tmp.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=keys)
-            writer.writeheader()
-            writer.writerows(self.rows)
-        os.replace(tmp, self.path)
-        if self.tb is not None:
-            step = int(row["train/env_steps"])
-            for k, v in row.items():
-                # NaN means "nothing to report" (no episode ended): a gap, not a point.
-                if k not in ("epoch", "train/env_steps") and math.isfinite(v):
-                    self.tb.add_scalar(k, v, step)
-            self.tb.flush()
-
-    def close(self) -> None:
-        if self.tb is not None:
-            self.tb.close()
-
-
-def plot_success(rows: list[dict[str, float]], path: Path, title: str) -> None:
-    """Evaluation success rates and the training return against env steps, as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax, ax_return) = plt.subplots(1, 2, figsize=(10, 4))
-    evals = [r for r in rows if "eval/success" in r]
-    if evals:
-        steps = [r["train/env_steps"] for r in evals]
-        if all("eval/success_final" in r for r in evals):
-            finals = [r["eval/success_final"] for r in evals]
-            ax.plot(steps, finals, "o-", lw=2, label="contact at the end (headline)")
-        ax.plot(
-            steps,
-            [r["eval/success"] for r in evals],
-            "s--",
-            alpha=0.7,
-            label="contact at some step",
-        )
-        ax.legend(loc="best")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("evaluation success rate")
-    ax.set_ylim(-0.02, 1.02)
-    ax.grid(alpha=0.3)
-    train = [r for r in rows if "train/episode_return" in r and r.get("train/episodes", 1) > 0]
-    if train:
-        ax_return.plot(
-            [r["train/env_steps"] for r in train], [r["train/episode_return"] for r in train]
-        )
-    ax_return.set_xlabel("environment steps")
-    for a in (ax, ax_return):  # 1e5-scale step counts: plain tick labels run together
-        a.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
-    ax_return.set_ylabel("training episode return (exploring)")
-    ax_return.grid(alpha=0.3)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 # ----------------------------------------------------------------- run
-def eval_rank(row: dict[str, float]) -> tuple[float, float, float]:
-    """Order of evaluations for the best policy: success at the end of the episode (the
-    authors' metric), then success at some step, then the return."""
-    return (row["eval/success_final"], row["eval/success"], row["eval/episode_return"])
-
-
 def memory_use() -> dict[str, float]:
     """Host memory now and at its peak, and device memory where the device counts it
     (accelerators; CPU does not), GiB: logged every epoch so growth shows."""
@@ -344,76 +108,6 @@ def memory_use() -> dict[str, float]:
         pages = int(Path("/proc/self/statm").read_text().split()[1])
         use["memory/host_rss_gib"] = pages * os.sysconf("SC_PAGE_SIZE") / 2**30
     return use
-
-
-def read_config_json(path: Path) -> dict[str, Any]:
-    """A run's config.json as a dict; a damaged file is an error naming it."""
-    try:
-        data = json.loads(Path(path).read_text())
-        if not isinstance(data, dict):
-            raise TypeError(f"it holds a JSON {type(data).__name__}, not an object")
-    except (OSError, ValueError, TypeError) as err:
-        raise ValueError(f"{path} is unreadable ({err}); restore it or start a new run") from err
-    return data
-
-
-def config_to_json(config: TrainConfig) -> dict[str, Any]:
-    return dataclasses.asdict(config)
-
-
-def config_from_json(data: dict[str, Any]) -> TrainConfig:
-    data = dict(data)
-    data.setdefault("demos", "all")  # runs from before the setting used every demonstration
-    ddpg = dict(data.pop("ddpg"))
-    for key in ("hidden_sizes", "target_clip", "value_range"):
-        if ddpg.get(key) is not None:
-            ddpg[key] = tuple(ddpg[key])
-    return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
-
-
-BEST_DIR = "best"  # run_dir/best: the learner of the best evaluation, for evaluate --best
-
-# Settings a resumed run must share with its checkpoint: they fix the task, the physics,
-# the networks' and buffers' shapes. Everything else (learning rates, budget) may change.
-RESUME_FIXED = (
-    "task",
-    "reward",
-    "imitation",
-    "mocap_source",
-    "mocap",
-    "demos",
-    "physics",
-    "num_envs",
-    "algo",
-    "ddpg.hidden_sizes",
-    "ddpg.layer_norm",
-    "ddpg.batch_norm",
-    "ddpg.twin_critics",
-    "ddpg.num_atoms",
-    "ddpg.replay_capacity",
-)
-
-MEMBER_FIELDS = ("seed", "reward", "imitation", "run_dir")
-"""What members of one population may differ in; every other setting is shared (one
-program): seeds, and reward variants as data."""
-
-
-def _check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
-    current = json.loads(json.dumps(config_to_json(config)))  # tuples as JSON lists
-    # Through the dataclass: settings added since the run started take their defaults.
-    saved = json.loads(json.dumps(config_to_json(config_from_json(saved))))
-
-    def get(tree, dotted):
-        for part in dotted.split("."):
-            tree = tree.get(part) if isinstance(tree, dict) else None
-        return tree
-
-    for key in RESUME_FIXED:
-        if get(saved, key) != get(current, key):
-            raise checkpoint.CheckpointError(
-                f"--resume: {run_dir} was trained with {key}={get(saved, key)!r}, "
-                f"this command asks for {get(current, key)!r}"
-            )
 
 
 class Interrupts:
@@ -459,178 +153,6 @@ class Interrupts:
 
 class TrainingDiverged(RuntimeError):
     """Losses or parameters became NaN/inf; the last good checkpoint is kept."""
-
-
-def run_directory(config: TrainConfig) -> Path:
-    """``--run-dir``, or runs/<task>-<algo>-<time> when none is given."""
-    return Path(
-        config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
-    )
-
-
-class RunDirectory:
-    """One run's folder: config.json, metrics.csv + TensorBoard, checkpoints/, best/,
-    success.png. A member of a population has one like any run (``evaluate`` opens it)."""
-
-    def __init__(self, config: TrainConfig):
-        self.config = config
-        self.path = run_directory(config)
-        self.checkpoints = self.path / "checkpoints"
-        self.best_dir = self.path / BEST_DIR
-        self.config_path = self.path / "config.json"
-        self.last_saved = 0
-        self.best: dict[str, float] | None = None
-        self.log: MetricsLog | None = None
-
-    def check(self) -> None:
-        """Refuse a resume without a run and a fresh start over an existing run."""
-        if self.config.resume:
-            if not self.config_path.is_file():
-                raise FileNotFoundError(
-                    f"--resume: no run to continue in {self.path} (config.json missing)"
-                )
-            _check_resumable(read_config_json(self.config_path), self.config, self.path)
-        elif self.config_path.exists() and checkpoint.steps(self.checkpoints):
-            raise FileExistsError(
-                f"{self.path} already holds a run; pass --resume to continue it or choose "
-                "another --run-dir"
-            )
-
-    def latest_epoch(self) -> int | None:
-        """The newest intact checkpoint's epoch when resuming (damaged ones: a warning)."""
-        return checkpoint.latest_step(self.checkpoints) if self.config.resume else None
-
-    def last_checkpoint(self) -> str:
-        """Where training would continue from, for messages."""
-        if self.last_saved == 0:
-            return "no checkpoint was saved yet"
-        return f"the last checkpoint (epoch {self.last_saved}) is in {self.checkpoints}"
-
-    def restore(
-        self, algo: DDPG, like: TrainerState, index: int, epoch: int, verified: bool = False
-    ) -> dict[str, Any]:
-        """Member ``index``'s checkpoint tree of ``epoch`` (``algo``'s layout, shaped like
-        ``like``'s). ``verified``: :meth:`latest_epoch` returned ``epoch``, so its digest
-        was checked (hashing reads every byte of the step: a replay buffer is GBs)."""
-        num_devices = algo.num_devices
-        meta = checkpoint.read_metadata(self.checkpoints, epoch, verified=verified)
-        saved_devices = int(meta.get("num_devices", 1))
-        if saved_devices != num_devices:
-            raise checkpoint.CheckpointError(
-                f"--resume: {self.path} was trained on {saved_devices} device(s), this process "
-                f"has {num_devices}; resume with {saved_devices} (CPU: XLA_FLAGS="
-                f"--xla_force_host_platform_device_count={saved_devices})"
-            )
-        # The checkpoint's own setting says whether it holds the replay buffer.
-        saved_replay = meta["config"]["save_replay"]
-        tree, _ = checkpoint.restore(
-            self.checkpoints,
-            algo.checkpoint_tree(like, saved_replay, index),
-            epoch,
-            verified=True,  # checked by read_metadata above or by latest_epoch
-        )
-        return tree
-
-    def open(self, start_epoch: int) -> None:
-        """Write config.json (the run is known to start) and open the metrics log, keeping
-        the rows up to ``start_epoch``."""
-        self.path.mkdir(parents=True, exist_ok=True)
-        self.config_path.write_text(json.dumps(config_to_json(self.config), indent=2))
-        self.log = MetricsLog(self.path)
-        self.log.rows = [r for r in self.log.rows if r.get("epoch", 0) <= start_epoch]
-        self.best = max(
-            (r for r in self.log.rows if "eval/success" in r), key=eval_rank, default=None
-        )
-        if self.best is not None and not self._best_saved(int(self.best["epoch"])):
-            self.best = None  # killed while saving it: the next evaluation saves a best
-        self.last_saved = start_epoch
-
-    def _best_saved(self, epoch: int) -> bool:
-        """Whether best/ holds an intact policy of ``epoch``; a damaged one is set aside."""
-        if epoch not in checkpoint.steps(self.best_dir):
-            return False
-        if checkpoint.damage(self.best_dir, epoch) is None:
-            return True
-        checkpoint.discard_after(self.best_dir, epoch - 1)
-        return False
-
-    def wall_offset(self) -> float:
-        """Seconds a resumed run had already run (its kept rows' wall clock)."""
-        return self.log.rows[-1].get("time/wall_seconds", 0.0) if self.log.rows else 0.0
-
-    def metadata(self, epoch: int, num_devices: int) -> dict[str, Any]:
-        return {"epoch": epoch, "config": config_to_json(self.config), "num_devices": num_devices}
-
-    def save(self, tree: dict[str, Any], epoch: int, num_devices: int) -> None:
-        """Write ``tree`` (the learner's checkpoint layout) as the checkpoint of ``epoch``."""
-        checkpoint.save(self.checkpoints, epoch, tree, self.metadata(epoch, num_devices))
-        self.last_saved = epoch
-
-    def save_if_best(
-        self,
-        policy: Callable[[], dict[str, Any]],
-        epoch: int,
-        row: dict[str, float],
-        num_devices: int,
-    ) -> None:
-        """Keep ``policy()`` (the learner's policy tree) in best/ when ``row`` evaluates
-        better than every earlier evaluation."""
-        # DDPG's evaluations swing by tens of points (hand clap: 0.91 then 0.11 ten epochs
-        # later); the latest checkpoint is for resuming, this one is the policy to use.
-        if self.best is not None and eval_rank(row) <= eval_rank(self.best):
-            return
-        evals = {k: v for k, v in row.items() if k.startswith("eval/")}
-        meta = self.metadata(epoch, num_devices) | {"contents": "policy", "eval": evals}
-        checkpoint.save(self.best_dir, epoch, policy(), meta, max_to_keep=1)
-        self.best = row
-
-    def close(self) -> None:
-        if self.log is None:
-            return
-        self.log.close()
-        title = f"{self.config.task} ({self.config.algo}, {self.config.reward}"
-        title += ")" if self.config.imitation else ", no imitation)"
-        plot_success(self.log.rows, self.path / "success.png", title)
-
-    def summary(self, stop_reason: str, start_epoch: int) -> dict[str, Any]:
-        rows = self.log.rows if self.log is not None else []
-        evals = [r for r in rows if "eval/success" in r]
-        return {
-            "run_dir": str(self.path),
-            "stop_reason": stop_reason,
-            "epochs": int(rows[-1]["epoch"]) if rows else start_epoch,
-            "last_checkpoint": self.last_saved,
-            "final_eval": {k: v for k, v in evals[-1].items() if k.startswith("eval/")}
-            if evals
-            else {},
-            "best_eval_success_final": max(
-                (r["eval/success_final"] for r in evals), default=float("nan")
-            ),
-            "best_eval_success": max((r["eval/success"] for r in evals), default=float("nan")),
-            "best_checkpoint": int(self.best["epoch"]) if self.best is not None else None,
-        }
-
-
-def _check_population(configs: list[TrainConfig]) -> None:
-    if not configs:
-        raise ValueError("a population needs at least one run config")
-    shared = lambda c: {k: v for k, v in config_to_json(c).items() if k not in MEMBER_FIELDS}
-    for config in configs[1:]:
-        a, b = shared(configs[0]), shared(config)
-        if a != b:
-            diff = sorted(k for k in a if a[k] != b[k])
-            raise ValueError(
-                f"members of a population may differ only in {', '.join(MEMBER_FIELDS)}; "
-                f"{config.run_dir} differs from {configs[0].run_dir} in {', '.join(diff)}"
-            )
-    dirs = [str(run_directory(c)) for c in configs]
-    if len(set(dirs)) != len(dirs):
-        raise ValueError(f"members need distinct run directories, got {dirs}")
-    if any(c.algo != "ddpg" for c in configs):
-        raise ValueError(
-            f"training.run trains DDPG; --algo {configs[0].algo} runs through "
-            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
-        )
 
 
 def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None:
@@ -701,7 +223,7 @@ def _progress_line(
     return line + f"{what}: {shown}"
 
 
-def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]:
+def run(config: TrainConfig, out=None, env_factory=None) -> dict[str, Any]:
     """Train DDPG according to ``config``; returns a summary (final metrics, paths).
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment). Brax's
@@ -712,7 +234,7 @@ def run(config: TrainConfig, out=sys.stdout, env_factory=None) -> dict[str, Any]
 
 def run_population(
     configs: list[TrainConfig],
-    out=sys.stdout,
+    out=None,
     env_factory=None,
     labels: list[str] | None = None,
 ) -> list[dict[str, Any]]:
@@ -723,7 +245,7 @@ def run_population(
     trains as ``run(configs[i])`` alone would. ``labels`` group members in the progress
     line (e.g. by variant). Returns one summary per member.
     """
-    _check_population(configs)
+    check_population(configs)
     config = configs[0]
     launched = time.perf_counter()  # wall clock from here includes the compiles
     runs = [RunDirectory(c) for c in configs]

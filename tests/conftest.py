@@ -39,12 +39,14 @@ def real_data_or_skip() -> Path:
 
 @pytest.fixture(scope="session")
 def handshake_env():
-    """A batched handshake env on MJX (project's synthetic demos) with jitted reset/step."""
+    """A batched handshake env on MJX (project's synthetic demos) with jitted reset/step.
+    16 envs: MJX on 2 CPU cores steps in time proportional to the batch, and 16 draws
+    still spread every randomised quantity the tests check."""
     import jax
 
     from mjx_hands import env as env_lib
 
-    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic", physics="mjx")
+    env = env_lib.make_env("handshake", num_envs=16, mocap_source="synthetic", physics="mjx")
     return env, jax.jit(env.reset), jax.jit(env.step)
 
 
@@ -63,16 +65,24 @@ def native_handshake_env():
 
     from mjx_hands import env as env_lib
 
-    env = env_lib.make_env("handshake", num_envs=64, mocap_source="synthetic", physics="native")
+    env = env_lib.make_env("handshake", num_envs=16, mocap_source="synthetic", physics="native")
     return env, jax.jit(env.reset), jax.jit(env.step)
 
 
 # Tests that compile MJX, train for several epochs or start subprocesses that do: the
 # full suite runs them; `pytest -m "not slow"` leaves them out for the inner loop.
 SLOW_FIXTURES = {"handshake_env", "hand_run", "trained_point_reach"}
+# The README's test command runs two pytest-xdist workers (--dist loadgroup): the tests of
+# one expensive fixture go to one worker, so it is built once.
+GROUPED_FIXTURES = ("handshake_env", "hand_run", "native_handshake_env", "trained_point_reach")
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+        names = set(getattr(item, "fixturenames", ()))
+        if SLOW_FIXTURES & names:
             item.add_marker(pytest.mark.slow)
+        group = next((name for name in GROUPED_FIXTURES if name in names), None)
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group))

@@ -11,7 +11,7 @@ import pytest
 from mujoco import mjx
 
 from mjx_hands import env as env_lib
-from mjx_hands import scene
+from mjx_hands import scene, train_config
 from mjx_hands import shadow_hand as sh
 
 
@@ -107,11 +107,14 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     assert np.all(back <= cfg.start_retreats * cfg.start_backoff_steps)
 
 
-def test_a_start_at_the_first_step_backs_away_along_the_palm_line(handshake_env, reset_state):
+def test_a_start_at_the_first_step_backs_away_along_the_palm_line(native_handshake_env):
     """At the demonstration's first step there is nothing earlier: the palm backs away
     from the target's by ``start_backoff_distance`` per retreat. Reference: the same
-    schedule walked in Python, each candidate judged by native MuJoCo."""
-    env, _, _ = handshake_env
+    schedule walked in Python, each candidate judged by MuJoCo's own contacts. (The
+    search logic is the same for both physics; the native one compiles in seconds, and
+    MJX's starts are checked against native MuJoCo by the test above.)"""
+    env, reset, _ = native_handshake_env
+    reset_state = reset(jax.random.PRNGKey(42))
     single = env.unwrapped
     cfg, p = single.config, single.params
     data = _one(reset_state.pipeline_state)
@@ -160,7 +163,7 @@ def test_a_start_at_the_first_step_backs_away_along_the_palm_line(handshake_env,
         assert candidates[apart[0]][0] > cfg.start_max_penetration - 5e-4
 
 
-def test_batch_of_64_runs_100_random_steps_and_restarts(handshake_env, reset_state):
+def test_a_batch_runs_a_whole_episode_of_random_steps_and_restarts(handshake_env, reset_state):
     env, _, step = handshake_env
     length = env.unwrapped.episode_length
     assert length == 100
@@ -241,39 +244,6 @@ def test_contact_sensors_fire_when_hands_meet_and_not_when_apart(
         fired.append(readings)
     assert fired[0].sum() == 0
     assert fired[-1][sh.sensor_index("ff_distal")] == 1
-
-
-def test_mjx_agrees_with_native_mujoco_on_a_short_rollout(handshake_env, reset_state):
-    env, _, _ = handshake_env
-    single = env.unwrapped
-    m = single.mj_model
-    data = _one(reset_state.pipeline_state)
-    rng = np.random.default_rng(0)
-    ctrl = rng.uniform(m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1], size=(25, m.nu))
-
-    @jax.jit
-    def rollout(data, ctrl):
-        def body(d, u):
-            d = mjx.step(single.physics.mjx_model, d.replace(ctrl=u))
-            return d, d.qpos
-
-        return jax.lax.scan(body, data, ctrl)[1]
-
-    mjx_qpos = np.asarray(rollout(data, jnp.asarray(ctrl, jnp.float32)))
-    d = mujoco.MjData(m)
-    d.qpos[:] = np.asarray(data.qpos)
-    d.qvel[:] = np.asarray(data.qvel)
-    d.mocap_pos[:] = np.asarray(data.mocap_pos)
-    d.mocap_quat[:] = np.asarray(data.mocap_quat)
-    native = []
-    for u in ctrl:
-        d.ctrl[:] = u
-        mujoco.mj_step(m, d)
-        native.append(d.qpos.copy())
-    native = np.array(native)
-    # float32 MJX against float64 MuJoCo under set-point jumps across the whole range.
-    np.testing.assert_allclose(mjx_qpos, native, atol=1e-3)
-    assert np.abs(native[-1] - np.asarray(data.qpos)).max() > 0.2  # it moved
 
 
 def test_model_sizes_are_lean(handshake_env):
@@ -401,10 +371,10 @@ def test_the_task_registry_is_what_every_module_reads():
     import typing
 
     import mjx_hands
-    from mjx_hands import mocap, reward_params, tasks, training
+    from mjx_hands import mocap, reward_params, tasks
 
     assert mjx_hands.TASKS == env_lib.TASKS == mocap.TASKS == tasks.TASKS
-    assert typing.get_args(training.Task) == tasks.TASKS
+    assert typing.get_args(train_config.Task) == tasks.TASKS
     for name in tasks.TASKS:
         spec = tasks.spec(name)
         assert reward_params.REQUIRED_CONTACTS[name] == spec.required_contacts

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+import tiny
 
 from mjx_hands import physics, scene
 from mjx_hands import shadow_hand as sh
@@ -98,7 +99,7 @@ def test_native_readings_match_an_independent_mj_forward_as_the_hands_meet(
 
 @pytest.fixture(scope="module")
 def both_rollouts(native_handshake_env, handshake_env, reset_state):
-    """The same 64 episodes stepped 5 control periods by MJX and by native MuJoCo under
+    """The same episodes (16) stepped 5 control periods by MJX and by native MuJoCo under
     the same random actions (MJX's episode starts, posed by each physics)."""
     native_env, _, native_step = native_handshake_env
     _, _, mjx_step = handshake_env
@@ -122,7 +123,7 @@ def test_native_and_mjx_agree_on_short_rollouts_from_the_same_starts(both_rollou
         # keeps 16 contacts in float32, native all of them in float64): compare the rest.
         apart &= b.pipeline_state.sensordata[:, closest_found] == 0
         apart &= np.stack([a.metrics[f"contact/{n}"] for n in sh.CONTACT_SENSORS], -1).sum(-1) == 0
-        assert apart.sum() >= 32, apart.sum()
+        assert apart.sum() >= apart.size // 2, apart.sum()
         gap = np.abs(a.pipeline_state.qpos - b.pipeline_state.qpos).max(-1)[apart]
         rewards = [k for k in a.metrics if k.startswith("reward/")]
         reward_gap = np.max(
@@ -163,7 +164,7 @@ def test_native_batch_restarts_its_episodes_and_isolates_a_diverged_env(
     # The diverged env restarted at a fresh, finite start; the others went on.
     assert int(after.info["episode"].step[3]) == 0
     assert np.all(np.isfinite(np.asarray(after.pipeline_state.qpos)))
-    assert np.all(np.asarray(after.info["episode"].step)[np.arange(64) != 3] == 1)
+    assert np.all(np.asarray(after.info["episode"].step)[np.arange(len(done)) != 3] == 1)
 
 
 @pytest.mark.slow
@@ -216,26 +217,19 @@ def test_native_starts_have_the_hands_apart(native_handshake_env):
 
 
 @pytest.mark.slow
+@tiny.HAND_GROUP
 def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once(tmp_path):
     """DDPG on the hand task with native physics: 2 + 2 epochs equal 4 (parameters and
-    replay), and each run traced its epoch once."""
-    import dataclasses
+    replay), and each run traced its epoch once (baseline 2 without imitation: the run
+    alone of the population test, whose compiled programs it reuses in one process)."""
     import io
 
-    from mjx_hands import checkpoint, training
-    from mjx_hands.agents.ddpg import DDPGConfig
-
-    small = DDPGConfig(
-        hidden_sizes=(32, 32), batch_size=32, replay_capacity=1_024, min_replay_size=64,
-        unroll_length=4, updates_per_iteration=2, iterations_per_epoch=2,
-    )
+    from mjx_hands import checkpoint, train_config, training
 
     def config(run_dir, **overrides):
-        base = training.TrainConfig(
-            task="handshake", mocap_source="synthetic", physics="native", num_envs=8,
-            eval_envs=8, epochs=4, eval_every=2, run_dir=str(run_dir), ddpg=small,
-        )
-        return dataclasses.replace(base, **overrides)
+        settings = {"reward": "baseline2", "imitation": False, "epochs": 4, "eval_every": 2}
+        settings |= overrides
+        return tiny.hand_config(run_dir=str(run_dir), **settings)
 
     full = training.run(config(tmp_path / "full"), out=io.StringIO())
     training.run(config(tmp_path / "split", epochs=2), out=io.StringIO())
@@ -244,7 +238,7 @@ def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once
     trees = []
     for run in ("full", "split"):
         ckpt = tmp_path / run / "checkpoints"
-        cfg = training.config_from_json(checkpoint.read_metadata(ckpt)["config"])
+        cfg = train_config.config_from_json(checkpoint.read_metadata(ckpt)["config"])
         algo, _ = training.make_learner(cfg)
         like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
         trees.append(checkpoint.restore(ckpt, algo.checkpoint_tree(like, True))[0])
@@ -260,10 +254,10 @@ def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once
 TWO_DEVICE_NATIVE_SCRIPT = """
 import io, json, sys
 import jax, numpy as np
-from mjx_hands import training
+from mjx_hands import train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 assert len(jax.local_devices()) == 2, jax.local_devices()
-config = training.TrainConfig(
+config = train_config.TrainConfig(
     task="handshake", mocap_source="synthetic", physics="native", num_envs=8, eval_envs=8,
     epochs=1, eval_every=1, run_dir=sys.argv[1],
     ddpg=DDPGConfig(hidden_sizes=(32, 32), batch_size=32, replay_capacity=1_024,

@@ -8,20 +8,17 @@ import dataclasses
 import io
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import tiny
 
-from mjx_hands import experiments, training
+from mjx_hands import experiments, train_config, training
 from mjx_hands.agents.ddpg import DDPG, DDPGConfig, member
 from mjx_hands.point_reach import PointReach, make_point_reach
-
-ROOT = Path(__file__).resolve().parents[1]
 
 POINT = DDPGConfig(
     hidden_sizes=(32, 32),
@@ -81,92 +78,62 @@ def test_population_refuses_member_info_of_the_wrong_size():
         DDPG(make_point_reach(4), POINT, episode_length=20, members=2).init(jax.random.PRNGKey(0))
 
 
-HAND = DDPGConfig(
-    hidden_sizes=(32, 32),
-    batch_size=64,
-    replay_capacity=2_048,
-    min_replay_size=256,
-    unroll_length=4,
-    updates_per_iteration=4,
-    iterations_per_epoch=4,
-)
-
-
-def _hand_config(**overrides) -> training.TrainConfig:
-    return training.TrainConfig(
-        task="handshake", mocap_source="synthetic", physics="native", num_envs=16,
-        eval_envs=16, ddpg=HAND, **overrides,
-    )
-
-
 @pytest.mark.slow
+@tiny.HAND_GROUP
 def test_reward_variants_are_data_and_members_are_independent():
-    """On the hand task (native physics): a baseline-1 member of a population (its
-    variant as data) trains as a baseline-1 run alone (variant from its config); changing
-    the other member's variant leaves member 0 bit for bit unchanged."""
-    configs = {
-        v: _hand_config(reward=v, seed=s, run_dir=f"unused/{v}")
-        for v, s in (("full", 0), ("baseline1", 1), ("baseline2", 1))
-    }
+    """On the hand task (native physics): a baseline-2 member of a population (its
+    variant as data, beside full-reward members) trains as a baseline-2 run alone (variant
+    from its config), so it neither sees its neighbours' reward nor disturbs them. The
+    members are the grid's below (2 variants x 2 seeds), so it reuses this population."""
+    grid = experiments.GridConfig(
+        variants=("full", "baseline2"), seeds=2, train=tiny.hand_config(run_dir="unused")
+    )
+    members = [config for _, config in experiments.members(grid)]  # (full, b2) x seeds 0, 1
 
-    def population(names: list[str]):
-        cs = [configs[n] for n in names]
+    def population(cs: list[train_config.TrainConfig]):
         algo, _ = training.make_learner(cs[0], population=cs)
         state, history = _train(algo, [c.seed for c in cs], epochs=2)
         evals = algo.evaluate(state, np.stack([np.asarray(jax.random.PRNGKey(9))] * len(cs)))
         return state, history, evals
 
-    with_b1, history_b1, evals_b1 = population(["full", "baseline1"])
-    with_b2, history_b2, _ = population(["full", "baseline2"])
-    alone, history_alone, evals_alone = population(["baseline1"])
-    # Independence: member 0 (full, seed 0) is identical whoever its neighbour is.
-    _assert_trees_close(member(with_b1, 0).learner, member(with_b2, 0).learner, 0.0, "learner")
-    np.testing.assert_equal(history_b1[-1][0], history_b2[-1][0])  # NaN: no episode ended yet
-    # ... while the neighbours were rewarded differently (baseline 2: no contact term).
-    assert history_b2[-1][1]["env/reward/contact"] == 0.0
-    assert history_b1[-1][1]["env/reward/contact"] >= 0.0
-    # Equivalence: the baseline-1 member equals the baseline-1 run alone.
-    _assert_trees_close(member(with_b1, 1).learner, member(alone, 0).learner, 1e-4, "learner")
+    pair, history_pair, evals_pair = population(members)
+    alone, history_alone, evals_alone = population(members[3:])
+    assert (members[3].reward, members[3].seed) == ("baseline2", 1)
+    # The neighbours were rewarded differently (baseline 2: no contact term).
+    assert history_pair[-1][3]["env/reward/contact"] == 0.0
+    assert history_pair[-1][1]["env/reward/contact"] >= 0.0
+    assert history_pair[-1][1]["env/reward/total"] != history_pair[-1][3]["env/reward/total"]
+    # Equivalence: the baseline-2 member (seed 1) equals the baseline-2 run alone.
+    _assert_trees_close(member(pair, 3).learner, member(alone, 0).learner, 1e-4, "learner")
     for key in ("env/reward/position", "env/reward/total", "sgd/critic_loss"):
-        np.testing.assert_allclose(history_b1[-1][1][key], history_alone[-1][0][key], rtol=1e-4)
+        np.testing.assert_allclose(history_pair[-1][3][key], history_alone[-1][0][key], rtol=1e-4)
     np.testing.assert_allclose(
-        evals_b1[1]["eval/episode_return"], evals_alone[0]["eval/episode_return"], rtol=1e-4
+        evals_pair[3]["eval/episode_return"], evals_alone[0]["eval/episode_return"], rtol=1e-4
     )
-    assert evals_b1[1]["eval/final_fingertip_goal_distance"] > 0
+    assert evals_pair[3]["eval/final_fingertip_goal_distance"] > 0
 
 
 # ------------------------------------------------------------------ grid CLI
-def _experiments(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "mjx_hands.experiments", *args],
-        cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False,
-    )
-
-
-TINY = [
-    "--task", "handshake", "--mocap-source", "synthetic", "--physics", "native",
-    "--num-envs", "8", "--eval-envs", "8", "--eval-every", "1", "--ddpg.hidden-sizes", "16", "16",
-    "--ddpg.batch-size", "32", "--ddpg.replay-capacity", "1024", "--ddpg.min-replay-size", "64",
-    "--ddpg.unroll-length", "4", "--ddpg.updates-per-iteration", "2",
-    "--ddpg.iterations-per-epoch", "3",
-]
-
-
 @pytest.mark.slow
-def test_a_grid_runs_resumes_and_reports_end_to_end(tmp_path):
+@tiny.HAND_GROUP
+def test_a_grid_runs_resumes_and_reports_end_to_end(tmp_path, capfd):
+    """The grid commands in this process (the resumed run reuses the first one's compiled
+    programs); ``python -m mjx_hands.experiments`` itself is run by the refusal test below
+    and by .ci/install_check."""
+    from mjx_hands import evaluate
+
     grid = tmp_path / "grid"
-    first = _experiments("run", *TINY, "--variants", "full", "baseline2", "--seeds", "2",
-                         "--epochs", "1", "--run-dir", str(grid))
-    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-3000:]
-    assert "4 runs trained together" in first.stdout
-    assert "eval success at the end: full" in first.stdout
+    assert experiments.main(["run", *tiny.hand_cli_args(), "--variants", "full", "baseline2",
+                             "--seeds", "2", "--epochs", "1", "--run-dir", str(grid)]) == 0
+    first = capfd.readouterr().out
+    assert "4 runs trained together" in first
+    assert "eval success at the end: full" in first
     record = json.loads((grid / "grid.json").read_text())
     assert [(m["variant"], m["seed"]) for m in record["members"]] == [
         ("full", 0), ("full", 1), ("baseline2", 0), ("baseline2", 1)
     ]
-    resumed = _experiments("run", "--run-dir", str(grid), "--resume", "--epochs", "2")
-    assert resumed.returncode == 0, resumed.stdout[-2000:] + resumed.stderr[-3000:]
-    assert "resumed from epoch 1" in resumed.stdout
+    assert experiments.main(["run", "--run-dir", str(grid), "--resume", "--epochs", "2"]) == 0
+    assert "resumed from epoch 1" in capfd.readouterr().out
     for m in record["members"]:
         run_dir = grid / m["run_dir"]
         config = json.loads((run_dir / "config.json").read_text())
@@ -175,21 +142,18 @@ def test_a_grid_runs_resumes_and_reports_end_to_end(tmp_path):
         assert [r["epoch"] for r in rows] == ["1.0", "2.0"]
         assert (run_dir / "best").is_dir() and (run_dir / "success.png").is_file()
     # A member is an ordinary run: evaluate opens it.
-    evaluated = subprocess.run(
-        [sys.executable, "-m", "mjx_hands.evaluate", str(grid / "baseline2" / "seed1"),
-         "--episodes", "4", "--video-episodes", "0"],
-        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False,
-    )
-    assert evaluated.returncode == 0, evaluated.stderr[-3000:]
-    report = _experiments("report", str(grid), "--out", str(tmp_path / "report"))
-    assert report.returncode == 0, report.stderr[-3000:]
+    member_dir = grid / "baseline2" / "seed1"
+    assert evaluate.main([str(member_dir), "--episodes", "4", "--video-episodes", "0"]) == 0
+    assert json.loads((member_dir / "eval.json").read_text())["episodes"] == 4
+    assert experiments.main(["report", str(grid), "--out", str(tmp_path / "report")]) == 0
     summary = json.loads((tmp_path / "report" / "summary.json").read_text())
     assert {(r["variant"], r["n_seeds"], r["final_epoch"]) for r in summary} == {
         ("full", 2, 2.0), ("baseline2", 2, 2.0)
     }
     assert (tmp_path / "report" / "fig4.png").stat().st_size > 10_000
-    again = _experiments("run", *TINY, "--seeds", "1", "--run-dir", str(grid))
-    assert again.returncode == 2 and "already holds a grid" in again.stderr
+    capfd.readouterr()
+    assert experiments.main(["run", *tiny.hand_cli_args(), "--seeds", "1", "--run-dir", str(grid)]) == 2
+    assert "already holds a grid" in capfd.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -323,7 +287,7 @@ def test_compare_learners_from_grids(tmp_path, capsys):
 
 def test_grid_members_differ_only_in_seed_and_variant():
     grid = experiments.GridConfig(variants=("full", "no_imitation"), seeds=2,
-                     train=dataclasses.replace(training.preset("cpu"), run_dir="g", seed=3))
+                     train=dataclasses.replace(train_config.preset("cpu"), run_dir="g", seed=3))
     pairs = experiments.members(grid)
     assert [(v, c.seed, c.reward, c.imitation, c.run_dir) for v, c in pairs] == [
         ("full", 3, "full", True, "g/full/seed3"),
@@ -362,7 +326,7 @@ def _scaled_factory(config, num_devices):
 
 
 def test_a_diverged_member_stops_alone(tmp_path, capsys):
-    base = training.TrainConfig(num_envs=16, eval_envs=16, epochs=3, eval_every=1, ddpg=POINT)
+    base = train_config.TrainConfig(num_envs=16, eval_envs=16, epochs=3, eval_every=1, ddpg=POINT)
     configs = [
         dataclasses.replace(base, run_dir=str(tmp_path / "ok")),
         dataclasses.replace(base, reward="baseline1", run_dir=str(tmp_path / "nan")),
@@ -402,7 +366,7 @@ def test_a_population_resumes_from_the_epoch_all_members_saved(tmp_path):
     from the common epoch and discards the newer one (its epoch is trained again)."""
     from mjx_hands import checkpoint
 
-    base = training.TrainConfig(num_envs=16, eval_envs=16, epochs=2, eval_every=1, ddpg=POINT)
+    base = train_config.TrainConfig(num_envs=16, eval_envs=16, epochs=2, eval_every=1, ddpg=POINT)
     configs = [dataclasses.replace(base, seed=s, run_dir=str(tmp_path / f"s{s}")) for s in (0, 1)]
     training.run_population(configs, out=io.StringIO(), env_factory=_scaled_factory)
     for step in (2,):  # member 1 "did not finish" its epoch-2 save

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjx_hands import brax_agents, checkpoint, training
+from mjx_hands import brax_agents, checkpoint, run_directory, train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
 from mjx_hands.point_reach import PointReach
@@ -43,7 +43,7 @@ SMALL = DDPGConfig(
 )
 
 
-def point_factory(config: training.TrainConfig, num_devices: int, env_class=PointReach):
+def point_factory(config: train_config.TrainConfig, num_devices: int, env_class=PointReach):
     single = env_class()
     return (
         BatchedEnv(single, config.num_envs // num_devices),
@@ -52,8 +52,8 @@ def point_factory(config: training.TrainConfig, num_devices: int, env_class=Poin
     )
 
 
-def _config(run_dir: Path, **overrides) -> training.TrainConfig:
-    base = training.TrainConfig(
+def _config(run_dir: Path, **overrides) -> train_config.TrainConfig:
+    base = train_config.TrainConfig(
         num_envs=16, eval_envs=16, epochs=4, eval_every=2, run_dir=str(run_dir), ddpg=SMALL
     )
     return dataclasses.replace(base, **overrides)
@@ -61,7 +61,7 @@ def _config(run_dir: Path, **overrides) -> training.TrainConfig:
 
 def _learner(run_dir: Path) -> dict:
     meta = checkpoint.read_metadata(run_dir / "checkpoints")
-    config = training.config_from_json(meta["config"])
+    config = train_config.config_from_json(meta["config"])
     algo, _ = training.make_learner(config, env_factory=point_factory)
     state = algo.init(jax.random.PRNGKey(0))
     tree, _ = checkpoint.restore(
@@ -129,7 +129,7 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
     )
     config = json.loads((run_dir / "config.json").read_text())
     assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
-    assert training.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
+    assert train_config.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert "eval/success" in rows[0] and len(rows) == 3
     assert list((run_dir / "tensorboard").glob("events.out.tfevents.*"))
@@ -154,7 +154,7 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     meta = checkpoint.read_metadata(run_dir / "best")
     assert meta["contents"] == "policy" and meta["eval"]["eval/success"] == best_row["eval/success"]
     algo, _ = training.make_learner(
-        training.config_from_json(meta["config"]), env_factory=point_factory
+        train_config.config_from_json(meta["config"]), env_factory=point_factory
     )
     like = algo.policy_tree(jax.eval_shape(algo.init, jax.random.PRNGKey(0)))
     tree, _ = checkpoint.restore(run_dir / "best", like)
@@ -305,7 +305,7 @@ def test_train_py_bad_input_gets_a_message_not_a_traceback(args, message, tmp_pa
     assert message in capsys.readouterr().err
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # once per session (or xdist worker), not per module visit
 def hand_run(tmp_path_factory):
     """train.py on the hand environment with a tiny budget (compiles dominate: minutes)."""
     run_dir = tmp_path_factory.mktemp("hand") / "run"
@@ -572,7 +572,7 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
     assert resumed == config  # the command line's --epochs is applied by tyro on top
     fresh = train_cli.default_config(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
-    assert fresh == training.preset("cpu")
+    assert fresh == train_config.preset("cpu")
 
 
 def test_brax_wrapper_restarts_episodes_with_fresh_randomisation():
@@ -629,7 +629,7 @@ def test_resume_uses_the_checkpoints_own_replay_setting(tmp_path):
 
 def test_metrics_log_survives_a_short_row(tmp_path):
     (tmp_path / "metrics.csv").write_text("epoch,train/env_steps,a\n1,10,0.5\n2,20\n")
-    log = training.MetricsLog(tmp_path)
+    log = run_directory.MetricsLog(tmp_path)
     assert log.rows == [
         {"epoch": 1.0, "train/env_steps": 10.0, "a": 0.5},
         {"epoch": 2.0, "train/env_steps": 20.0},
@@ -769,7 +769,7 @@ def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
         checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this process has 2"
     ):
         two_devices = types.SimpleNamespace(num_devices=2, checkpoint_tree=algo.checkpoint_tree)
-        training.RunDirectory(config).restore(two_devices, algo.init(jax.random.PRNGKey(0)), 0, 3)
+        run_directory.RunDirectory(config).restore(two_devices, algo.init(jax.random.PRNGKey(0)), 0, 3)
 
 
 @pytest.mark.slow
@@ -822,7 +822,7 @@ def test_a_damaged_config_json_is_named_on_resume(tmp_path, capsys):
 
 
 def test_replay_ratio_sets_the_updates_as_the_env_count_changes():
-    cpu, gpu = training.preset("cpu"), training.preset("gpu")
+    cpu, gpu = train_config.preset("cpu"), train_config.preset("gpu")
     for config in (cpu, gpu):  # both presets replay 25.6 transitions per env step
         ratio = (
             config.ddpg.updates_per_iteration

@@ -93,7 +93,7 @@ def episodes_of(
     return single, rollouts.rollout(single, policy, jax.random.split(key, count))
 
 
-def make(args: MakeArgs, log=sys.stdout) -> layout.Study:
+def make(args: MakeArgs, log=None) -> layout.Study:
     """Render every pair into ``args.out`` and write the study; returns it as read back."""
     check_args(args)
     out = Path(args.out)

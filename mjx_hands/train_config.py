@@ -1,0 +1,285 @@
+"""train.py's configuration: the config dataclass, presets, its JSON form, and the rules
+for resuming a run and for grouping runs into one population."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import jax
+
+from mjx_hands import checkpoint, tasks
+from mjx_hands.agents.ddpg import DDPGConfig
+
+Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Train a hand-interaction policy with DDPG (or Brax's SAC/PPO for comparison)."""
+
+    task: Task = "handshake"
+    """Interaction to learn."""
+    reward: Literal["full", "baseline1", "baseline2"] = "full"
+    """Reward: the paper's full reward, baseline1 (palm position only), baseline2
+    (no contact term)."""
+    imitation: bool = True
+    """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
+    mocap: str | None = None
+    """Folder of demonstrations; default: the authors' recordings in
+    ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
+    mocap_source: Literal["auto", "optitrack", "synthetic"] = "auto"
+    """Which demonstrations to read."""
+    demos: Literal["authors", "all"] = "authors"
+    """Of the recordings, the demonstrations the authors trained on, or all of them."""
+    target_rotation_noise: float = 0.0
+    """Std (radians) of a random per-episode rotation of the target hand."""
+    physics: Literal["auto", "mjx", "native"] = "auto"
+    """Physics: MJX (accelerators), native C MuJoCo on every CPU core (>10x MJX's speed
+    there) or auto (native on CPUs, MJX elsewhere)."""
+    algo: Literal["ddpg", "sac", "ppo"] = "ddpg"
+    """Learner: DDPG (the paper's) or Brax's SAC / PPO on the same environment."""
+    preset: Literal["auto", "cpu", "gpu"] = "auto"
+    """Size of the run; auto picks by the device JAX finds."""
+    num_envs: int = 64
+    """Parallel environments (summed over devices)."""
+    epochs: int = 100
+    """Training epochs (see --ddpg.iterations-per-epoch etc. for an epoch's size)."""
+    max_minutes: float | None = None
+    """Stop (with a checkpoint) once training has run this long."""
+    eval_every: int = 5
+    """Evaluate (and checkpoint) every this many epochs."""
+    checkpoint_every: int = 1
+    """Also checkpoint every this many epochs (a crash loses at most these epochs; the
+    CPU preset: 5, as its replay buffer makes a checkpoint cost a third of an epoch)."""
+    checkpoint_minutes: float | None = None
+    """Also checkpoint once this many minutes have passed since the last checkpoint."""
+    eval_envs: int = 64
+    """Episodes per evaluation (summed over devices), deterministic policy."""
+    seed: int = 0
+    """Seed of networks, exploration and episode randomisation."""
+    run_dir: str | None = None
+    """Output folder; default runs/<task>-<algo>-<time>."""
+    resume: bool = False
+    """Continue the run in --run-dir from its latest checkpoint."""
+    save_replay: bool = True
+    """Include the replay buffer in checkpoints (resume then equals an uninterrupted run)."""
+    ddpg: DDPGConfig = DDPGConfig()
+    """DDPG hyperparameters."""
+    replay_ratio: float | None = None
+    """Replayed transitions per collected one (updates x batch size / env steps), held as
+    --num-envs changes: when set, it fixes --ddpg.updates-per-iteration (rounded to a
+    multiple of --ddpg.actor-update-interval, at least one). Both presets replay 25.6."""
+
+    def __post_init__(self):
+        if (
+            self.replay_ratio is not None
+            and math.isfinite(self.replay_ratio)
+            and self.replay_ratio > 0
+        ):
+            # Resolved here, so config.json records the updates the run makes.
+            object.__setattr__(
+                self, "ddpg", updates_for_ratio(self.ddpg, self.num_envs, self.replay_ratio)
+            )
+        problems = []
+        for name in ("num_envs", "epochs", "eval_every", "eval_envs", "checkpoint_every"):
+            if getattr(self, name) <= 0:
+                problems.append(
+                    f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}"
+                )
+        for name in ("max_minutes", "checkpoint_minutes"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                problems.append(
+                    f"--{name.replace('_', '-')} must be a positive number, got {value}"
+                )
+        if self.replay_ratio is not None and not (
+            math.isfinite(self.replay_ratio) and self.replay_ratio > 0
+        ):
+            problems.append(f"--replay-ratio must be a positive number, got {self.replay_ratio}")
+        if not (math.isfinite(self.target_rotation_noise) and self.target_rotation_noise >= 0):
+            problems.append(
+                f"--target-rotation-noise must be a finite number >= 0, got "
+                f"{self.target_rotation_noise}"
+            )
+        if self.mocap is not None and not Path(self.mocap).is_dir():
+            problems.append(f"--mocap {self.mocap}: no such folder")
+        if problems:
+            raise ValueError("; ".join(problems))
+
+
+def updates_for_ratio(ddpg: DDPGConfig, num_envs: int, ratio: float) -> DDPGConfig:
+    """``ddpg`` with the updates per iteration that replay ``ratio`` sampled transitions per
+    env step at ``num_envs`` envs: ratio x num_envs x unroll / batch, rounded to a multiple
+    of the actor update interval (at least one interval)."""
+    collected = num_envs * ddpg.unroll_length
+    interval = ddpg.actor_update_interval
+    updates = max(interval, interval * round(ratio * collected / ddpg.batch_size / interval))
+    return dataclasses.replace(ddpg, updates_per_iteration=updates)
+
+
+def preset(kind: str, **overrides: Any) -> TrainConfig:
+    """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs)."""
+    if kind == "auto":
+        kind = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "cpu"
+    if kind == "cpu":
+        base = TrainConfig(
+            preset="cpu",
+            num_envs=64,
+            epochs=100,  # 640 k env steps, ~45 min on 2 quiet cores (~275 env steps/s with SGD)
+            eval_envs=64,
+            # A 250 MB checkpoint (the replay buffer) takes ~2.4 s against a ~6.5 s epoch
+            # (native physics): every 5th epoch costs 7 %, every epoch 37 % (RESULTS.md).
+            checkpoint_every=5,
+            ddpg=DDPGConfig(
+                replay_capacity=200_000,
+                unroll_length=10,
+                updates_per_iteration=64,
+                iterations_per_epoch=10,
+            ),
+        )
+    elif kind == "gpu":
+        base = TrainConfig(
+            preset="gpu",
+            num_envs=4096,
+            epochs=200,
+            eval_envs=1024,
+            save_replay=False,
+            ddpg=DDPGConfig(
+                batch_size=4096,
+                replay_capacity=2_000_000,
+                min_replay_size=40_960,
+                unroll_length=5,
+                # Replay ratio 25.6 as in the CPU preset (128 x 4,096 / 20,480): the H100
+                # handshake run reached 86 % in 6.35 M steps with it; updates are cheap on a GPU.
+                updates_per_iteration=128,
+                iterations_per_epoch=10,
+            ),
+        )
+    else:
+        raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
+    return dataclasses.replace(base, **overrides)
+
+
+def read_config_json(path: Path) -> dict[str, Any]:
+    """A run's config.json as a dict; a damaged file is an error naming it."""
+    try:
+        data = json.loads(Path(path).read_text())
+        if not isinstance(data, dict):
+            raise TypeError(f"it holds a JSON {type(data).__name__}, not an object")
+    except (OSError, ValueError, TypeError) as err:
+        raise ValueError(f"{path} is unreadable ({err}); restore it or start a new run") from err
+    return data
+
+
+def config_to_json(config: TrainConfig) -> dict[str, Any]:
+    return dataclasses.asdict(config)
+
+
+def config_from_json(data: dict[str, Any]) -> TrainConfig:
+    data = dict(data)
+    data.setdefault("demos", "all")  # runs from before the setting used every demonstration
+    ddpg = dict(data.pop("ddpg"))
+    for key in ("hidden_sizes", "target_clip", "value_range"):
+        if ddpg.get(key) is not None:
+            ddpg[key] = tuple(ddpg[key])
+    return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
+
+
+# Settings a resumed run must share with its checkpoint: they fix the task, the physics,
+# the networks' and buffers' shapes. Everything else (learning rates, budget) may change.
+RESUME_FIXED = (
+    "task",
+    "reward",
+    "imitation",
+    "mocap_source",
+    "mocap",
+    "demos",
+    "physics",
+    "num_envs",
+    "algo",
+    "ddpg.hidden_sizes",
+    "ddpg.layer_norm",
+    "ddpg.batch_norm",
+    "ddpg.twin_critics",
+    "ddpg.num_atoms",
+    "ddpg.replay_capacity",
+)
+
+MEMBER_FIELDS = ("seed", "reward", "imitation", "run_dir")
+"""What members of one population may differ in; every other setting is shared (one
+program): seeds, and reward variants as data."""
+
+
+def check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
+    current = json.loads(json.dumps(config_to_json(config)))  # tuples as JSON lists
+    # Through the dataclass: settings added since the run started take their defaults.
+    saved = json.loads(json.dumps(config_to_json(config_from_json(saved))))
+
+    def get(tree, dotted):
+        for part in dotted.split("."):
+            tree = tree.get(part) if isinstance(tree, dict) else None
+        return tree
+
+    for key in RESUME_FIXED:
+        if get(saved, key) != get(current, key):
+            raise checkpoint.CheckpointError(
+                f"--resume: {run_dir} was trained with {key}={get(saved, key)!r}, "
+                f"this command asks for {get(current, key)!r}"
+            )
+
+
+def check_population(configs: list[TrainConfig]) -> None:
+    if not configs:
+        raise ValueError("a population needs at least one run config")
+    shared = lambda c: {k: v for k, v in config_to_json(c).items() if k not in MEMBER_FIELDS}
+    for config in configs[1:]:
+        a, b = shared(configs[0]), shared(config)
+        if a != b:
+            diff = sorted(k for k in a if a[k] != b[k])
+            raise ValueError(
+                f"members of a population may differ only in {', '.join(MEMBER_FIELDS)}; "
+                f"{config.run_dir} differs from {configs[0].run_dir} in {', '.join(diff)}"
+            )
+    dirs = [str(run_dir_path(c)) for c in configs]
+    if len(set(dirs)) != len(dirs):
+        raise ValueError(f"members need distinct run directories, got {dirs}")
+    if any(c.algo != "ddpg" for c in configs):
+        raise ValueError(
+            f"training.run trains DDPG; --algo {configs[0].algo} runs through "
+            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
+        )
+
+
+def run_dir_path(config: TrainConfig) -> Path:
+    """``--run-dir``, or runs/<task>-<algo>-<time> when none is given."""
+    return Path(
+        config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
+    )
+
+
+# What a config sets beyond its compiled programs: seeds are data, the rest is the run
+# loop's. Learners are shared between configs that differ only in these
+# (training.make_learner).
+RUN_LOOP_FIELDS = {
+    "seed": 0,
+    "run_dir": None,
+    "resume": False,
+    "epochs": 1,
+    "max_minutes": None,
+    "eval_every": 1,
+    "checkpoint_every": 1,
+    "checkpoint_minutes": None,
+    "save_replay": True,
+    "replay_ratio": None,  # already resolved into ddpg.updates_per_iteration
+    "preset": "auto",  # its values are in the other fields
+}
+
+
+def program_config(config: TrainConfig) -> TrainConfig:
+    """``config`` with the fields that leave its compiled programs unchanged at defaults."""
+    return dataclasses.replace(config, **RUN_LOOP_FIELDS)
