@@ -228,6 +228,7 @@ def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once
 
     def config(run_dir, **overrides):
         settings = {"reward": "baseline2", "imitation": False, "epochs": 4, "eval_every": 2}
+        settings["checkpoint_every"] = 2  # the resume needs epoch 2's; the rest cost saves
         settings |= overrides
         return tiny.hand_config(run_dir=str(run_dir), **settings)
 

@@ -55,8 +55,9 @@ def test_a_population_of_two_equals_two_runs_alone():
     env = make_point_reach(16)
     pair = DDPG(env, POINT, episode_length=20, members=2)
     pop, pop_history = _train(pair, [0, 5], epochs=3)
+    single = DDPG(env, POINT, episode_length=20)  # one learner, compiled once, two seeds
     for index, seed in enumerate([0, 5]):
-        alone, history = _train(DDPG(env, POINT, episode_length=20), [seed], epochs=3)
+        alone, history = _train(single, [seed], epochs=3)
         _assert_trees_close(member(pop, index).learner, member(alone, 0).learner, 1e-5, "learner")
         _assert_trees_close(member(pop, index).buffer, member(alone, 0).buffer, 1e-5, "buffer")
         assert pop_history[-1][index]["train/updates"] == history[-1][0]["train/updates"] > 0
