@@ -254,44 +254,15 @@ def run_population(
     labels = labels or [str(r.path) for r in runs]
     print(f"building the {config.task} environment and learner ...", file=out, flush=True)
     algo, single = make_learner(config, env_factory=env_factory, population=configs)
-    where = (
-        runs[0].path
-        if len(runs) == 1
-        else f"{len(runs)} runs in {os.path.commonpath([str(r.path) for r in runs])}"
-    )
-    print(
-        f"{config.task}: {single.describe()}, "
-        f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
-        f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
-        f"run dir {where} ({time.perf_counter() - launched:.0f} s)",
-        file=out,
-        flush=True,
-    )
+    print(_setup_line(config, runs, algo, single, launched), file=out, flush=True)
     state = algo.init(np.stack([np.asarray(jax.random.PRNGKey(c.seed)) for c in configs]))
-    saved = [r.latest_epoch() for r in runs]
-    start_epoch = 0
-    if any(s is not None for s in saved):
-        if any(s is None for s in saved):
-            missing = [str(r.path) for r, s in zip(runs, saved) if s is None]
-            raise checkpoint.CheckpointError(f"--resume: no checkpoint in {', '.join(missing)}")
-        start_epoch = min(saved)  # members save together; a crash mid-save leaves some ahead
-        for r in runs:  # ... whose newer checkpoints the resumed run will write again
-            checkpoint.discard_after(r.checkpoints, start_epoch)
-            checkpoint.discard_after(r.best_dir, start_epoch)
-        trees = [
-            r.restore(algo, state, i, start_epoch, verified=s == start_epoch)
-            for i, (r, s) in enumerate(zip(runs, saved, strict=True))
-        ]
-        state = algo.from_checkpoint_trees(trees, state)
-        print(f"resumed from epoch {start_epoch}", file=out, flush=True)
+    state, start_epoch = _resume(algo, state, runs, out)
     for r in runs:
         r.open(start_epoch)
     # A resumed run's wall clock continues from where its kept rows end.
     launched -= runs[0].wall_offset()
-    steps_per_epoch = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
-    started = time.perf_counter()
+    started = last_save_time = time.perf_counter()
     stop_reason = "epochs"
-    last_save_time = started
     diverged: set[int] = set()
     interrupts = Interrupts()
     interrupts.install()
@@ -310,18 +281,8 @@ def run_population(
             diverged.update(_newly_diverged(epoch, metrics, runs, diverged))
             if len(diverged) == len(runs):
                 raise TrainingDiverged(f"epoch {epoch}: every member of the population diverged")
-            common = {
-                "epoch": float(epoch),
-                "time/epoch_seconds": seconds,
-                "time/env_steps_per_second": steps_per_epoch / seconds,  # this run's
-                "time/wall_seconds": time.perf_counter() - launched,
-            }
-            if len(runs) > 1:  # what the machine did: every member's steps
-                common["time/population_env_steps_per_second"] = (
-                    len(runs) * steps_per_epoch / seconds
-                )
-            common |= memory_use()
-            rows = [common | m for m in metrics]
+            rows = _epoch_rows(config, len(runs), epoch, seconds, time.perf_counter() - launched)
+            rows = [row | m for row, m in zip(rows, metrics)]
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
@@ -339,28 +300,13 @@ def run_population(
             remaining = (config.epochs - epoch) * elapsed / max(epoch - start_epoch, 1)
             if config.max_minutes is not None:  # whichever budget ends the run first
                 remaining = min(remaining, max(60 * config.max_minutes - elapsed, 0.0))
-            rate = len(runs) * common["time/env_steps_per_second"]
+            rate = len(runs) * rows[0]["time/env_steps_per_second"]
             line = _progress_line(epoch, config.epochs, rate, rows, labels)
             print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
             since_save = time.perf_counter() - last_save_time
-            if (
-                evaluate
-                or out_of_time
-                or epoch % config.checkpoint_every == 0
-                or (
-                    config.checkpoint_minutes is not None
-                    and since_save > 60 * config.checkpoint_minutes
-                )
-            ):
+            if evaluate or out_of_time or _checkpoint_due(config, epoch, since_save):
                 with interrupts.deferred():
-                    for i, (r, row) in enumerate(zip(runs, rows)):
-                        if i in diverged:
-                            continue
-                        tree = algo.checkpoint_tree(state, r.config.save_replay, i)
-                        r.save(tree, epoch, algo.num_devices)
-                        if "eval/success" in row:
-                            policy = functools.partial(algo.policy_tree, state, i)
-                            r.save_if_best(policy, epoch, row, algo.num_devices)
+                    _save_members(algo, state, runs, rows, diverged, epoch)
                 last_save_time = time.perf_counter()
             if out_of_time:
                 stop_reason = "max_minutes"
@@ -381,3 +327,74 @@ def run_population(
     return [
         r.summary(stop_reason, start_epoch) | {"epoch_compilations": algo.trace_count} for r in runs
     ]
+
+
+def _setup_line(config: TrainConfig, runs: list[RunDirectory], algo, single, launched) -> str:
+    """What was built: task, physics, batch, devices, episode, where the runs go."""
+    where = (
+        runs[0].path
+        if len(runs) == 1
+        else f"{len(runs)} runs in {os.path.commonpath([str(r.path) for r in runs])}"
+    )
+    return (
+        f"{config.task}: {single.describe()}, "
+        f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
+        f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
+        f"run dir {where} ({time.perf_counter() - launched:.0f} s)"
+    )
+
+
+def _resume(algo, state, runs: list[RunDirectory], out) -> tuple[Any, int]:
+    """(state, epoch to continue from): the members' common newest checkpoint restored
+    into ``state``, or ``state`` and 0 when nothing is resumed."""
+    saved = [r.latest_epoch() for r in runs]
+    if all(s is None for s in saved):
+        return state, 0
+    if any(s is None for s in saved):
+        missing = [str(r.path) for r, s in zip(runs, saved) if s is None]
+        raise checkpoint.CheckpointError(f"--resume: no checkpoint in {', '.join(missing)}")
+    start_epoch = min(saved)  # members save together; a crash mid-save leaves some ahead
+    for r in runs:  # ... whose newer checkpoints the resumed run will write again
+        checkpoint.discard_after(r.checkpoints, start_epoch)
+        checkpoint.discard_after(r.best_dir, start_epoch)
+    trees = [
+        r.restore(algo, state, i, start_epoch, verified=s == start_epoch)
+        for i, (r, s) in enumerate(zip(runs, saved, strict=True))
+    ]
+    print(f"resumed from epoch {start_epoch}", file=out, flush=True)
+    return algo.from_checkpoint_trees(trees, state), start_epoch
+
+
+def _epoch_rows(
+    config: TrainConfig, members: int, epoch: int, seconds: float, wall: float
+) -> list[dict[str, float]]:
+    """Each member's timing and memory columns of an epoch's metrics row."""
+    steps = config.num_envs * config.ddpg.unroll_length * config.ddpg.iterations_per_epoch
+    row = {
+        "epoch": float(epoch),
+        "time/epoch_seconds": seconds,
+        "time/env_steps_per_second": steps / seconds,  # this run's
+        "time/wall_seconds": wall,
+    }
+    if members > 1:  # what the machine did: every member's steps
+        row["time/population_env_steps_per_second"] = members * steps / seconds
+    return [row | memory_use()] * members
+
+
+def _checkpoint_due(config: TrainConfig, epoch: int, since_save: float) -> bool:
+    """Whether the epoch count or the wall clock since the last save asks for one."""
+    if epoch % config.checkpoint_every == 0:
+        return True
+    return config.checkpoint_minutes is not None and since_save > 60 * config.checkpoint_minutes
+
+
+def _save_members(algo, state, runs: list[RunDirectory], rows, diverged: set[int], epoch: int):
+    """Every healthy member's checkpoint of ``epoch``, and its policy in best/ when this
+    epoch's evaluation is its best so far."""
+    for i, (r, row) in enumerate(zip(runs, rows)):
+        if i in diverged:
+            continue
+        r.save(algo.checkpoint_tree(state, r.config.save_replay, i), epoch, algo.num_devices)
+        if "eval/success" in row:
+            policy = functools.partial(algo.policy_tree, state, i)
+            r.save_if_best(policy, epoch, row, algo.num_devices)
