@@ -79,33 +79,31 @@ def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomizatio
     return BraxTrainingEnv(env, num_envs=None)
 
 
-def network_factory(config):
-    """Brax's network factory for ``config.algo``, hidden layers as DDPG's."""
+def network_factory(algo: str, hidden_sizes: tuple[int, ...]):
+    """Brax's network factory for ``algo``, with these hidden layers (DDPG's)."""
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.sac import networks as sac_networks
 
-    hidden = tuple(config.ddpg.hidden_sizes)
-    if config.algo == "ppo":
+    hidden = tuple(hidden_sizes)
+    if algo == "ppo":
         return functools.partial(
             ppo_networks.make_ppo_networks,
             policy_hidden_layer_sizes=hidden,
             value_hidden_layer_sizes=hidden,
         )
-    if config.algo == "sac":
+    if algo == "sac":
         return functools.partial(sac_networks.make_sac_networks, hidden_layer_sizes=hidden)
-    raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected one of {ALGOS}")
+    raise ValueError(f"unknown Brax algorithm {algo!r}; expected one of {ALGOS}")
 
 
 def load_policy(run_dir, config, single):
     """(act, params) of a SAC or PPO run: the parameters it saved, in networks rebuilt as
     its trainer built them (observations normalised); ``act``: observations
-    (..., observation_size) -> deterministic actions (..., action_size)."""
+    (..., observation_size) -> deterministic actions (..., action_size), the parameters
+    bound as data (``jax.tree_util.Partial``)."""
     from pathlib import Path
 
     from brax.io import model as brax_model
-    from brax.training.acme import running_statistics
-    from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.sac import networks as sac_networks
 
     path = Path(run_dir) / PARAMS_FILE
     if not path.is_file():
@@ -114,26 +112,33 @@ def load_policy(run_dir, config, single):
             "training did not finish"
         )
     params = brax_model.load_params(str(path))
-    normalize = running_statistics.normalize
-    if config.algo == "ppo":
-        networks = network_factory(config)(
-            (single.observation_size,), single.action_size, preprocess_observations_fn=normalize
-        )
-        make_policy = ppo_networks.make_inference_fn(networks)
-    else:
-        networks = network_factory(config)(
-            observation_size=single.observation_size,
-            action_size=single.action_size,
-            preprocess_observations_fn=normalize,
-        )
-        make_policy = sac_networks.make_inference_fn(networks)
-    return _deterministic(make_policy, params), params
+    apply = _rebuilt_apply(
+        config.algo, tuple(config.ddpg.hidden_sizes), single.observation_size, single.action_size
+    )
+    return jax.tree_util.Partial(apply, params), params
 
 
-def _deterministic(make_policy, params):
-    """obs -> action of Brax's ``make_policy`` (the mode: no sampling, so no key used)."""
-    policy = make_policy(params, deterministic=True)
-    return lambda obs: policy(obs, jax.random.PRNGKey(0))[0]
+@functools.lru_cache(maxsize=8)
+def _rebuilt_apply(algo: str, hidden_sizes: tuple[int, ...], observation_size, action_size):
+    """apply(params, obs) -> deterministic action of the networks ``algo``'s trainer
+    builds for these sizes; kept per shape, so loaded runs of one program share it."""
+    from brax.training.acme import running_statistics
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.sac import networks as sac_networks
+
+    # Brax's PPO trainer passes the observation's shape, SAC's its size.
+    obs = (observation_size,) if algo == "ppo" else observation_size
+    networks = network_factory(algo, hidden_sizes)(
+        obs, action_size, preprocess_observations_fn=running_statistics.normalize
+    )
+    inference = {"ppo": ppo_networks, "sac": sac_networks}[algo].make_inference_fn
+    return functools.partial(_deterministic_apply, inference(networks))
+
+
+def _deterministic_apply(make_policy, params, obs):
+    """The action of Brax's ``make_policy`` at ``params`` (the mode: no sampling, so no
+    key used)."""
+    return make_policy(params, deterministic=True)(obs, jax.random.PRNGKey(0))[0]
 
 
 def run(config, out=None, env_factory=None) -> dict[str, Any]:
@@ -206,7 +211,7 @@ def run(config, out=None, env_factory=None) -> dict[str, Any]:
             num_minibatches=4,
             num_updates_per_batch=4,
             entropy_cost=1e-3,
-            network_factory=network_factory(config),
+            network_factory=network_factory(config.algo, config.ddpg.hidden_sizes),
         )
     elif config.algo == "sac":
         make_policy, params, _ = sac.train(
@@ -216,14 +221,14 @@ def run(config, out=None, env_factory=None) -> dict[str, Any]:
             min_replay_size=ddpg.min_replay_size,
             max_replay_size=ddpg.replay_capacity,
             grad_updates_per_step=max(1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)),
-            network_factory=network_factory(config),
+            network_factory=network_factory(config.algo, config.ddpg.hidden_sizes),
         )
     else:
         raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected sac or ppo")
     brax_model.save_params(str(run_dir / PARAMS_FILE), params)
 
     # Brax's own inference function here; load_policy rebuilds it (tests compare the two).
-    act = _deterministic(make_policy, params)
+    act = jax.tree_util.Partial(functools.partial(_deterministic_apply, make_policy), params)
     trajectory = rollout(single, act, episode_keys(config.seed + 1, config.eval_envs))
     final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)

@@ -159,9 +159,7 @@ def load_policy(
     ``env_factory``: as :func:`mjx_hands.training.make_learner` (the run's task env by
     default)."""
     run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise FileNotFoundError(f"{run_dir}: no such run folder")
-    algo_name = run_algo(run_dir)
+    algo_name = run_algo(run_dir)  # "ddpg" for a missing folder, which the next step names
     if algo_name in brax_agents.ALGOS:
         if step is not None or best:
             raise ValueError(

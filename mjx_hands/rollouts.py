@@ -18,12 +18,24 @@ import numpy as np
 from mjx_hands import contact_profile, contract, shadow_hand
 
 
+def as_policy(policy: Callable[[jax.Array], jax.Array]) -> jax.tree_util.Partial:
+    """``policy`` as a pytree whose bound arguments are data, not constants.
+
+    A ``jax.tree_util.Partial(apply, params)`` (what the learners' ``load_policy``
+    return) passes ``params`` into the compiled step as arguments: every policy of one
+    program (the seeds of a grid, a study's runs) shares one compile. Any other callable
+    is wrapped as it is and compiles once per object.
+    """
+    return policy if isinstance(policy, jax.tree_util.Partial) else jax.tree_util.Partial(policy)
+
+
 @functools.lru_cache(maxsize=8)
-def compiled_rollout(single, policy, reset=None, extra=None):
-    """The jitted (reset, step, per-state record) of :func:`rollout`, kept per (env,
-    policy, reset, extra): a sweep that rolls out chunk after chunk compiles once."""
+def compiled_rollout(single, reset=None, extra=None):
+    """The jitted (reset, step(state, policy), per-state record) of :func:`rollout`, kept
+    per (env, reset, extra): a sweep that rolls out chunk after chunk, policy after
+    policy, compiles once per policy function (its parameters are arguments)."""
     reset = jax.jit(reset or jax.vmap(single.reset))
-    step = jax.jit(lambda s: jax.vmap(single.step)(s, policy(s.obs)))
+    step = jax.jit(lambda s, policy: jax.vmap(single.step)(s, policy(s.obs)))
     per_state = jax.jit(
         jax.vmap(lambda s: single.pose(s.pipeline_state) | (extra(s) if extra else {}))
     )
@@ -43,7 +55,8 @@ def rollout(
     reset_args: tuple = (),
     extra: Callable[[Any], dict[str, jax.Array]] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Run one whole episode of ``single`` per key (no restarts) under ``policy``.
+    """Run one whole episode of ``single`` per key (no restarts) under ``policy``
+    (observations (n, observation_size) -> actions; see :func:`as_policy`).
 
     Args:
       keys: (n, 2) one reset key per episode (:func:`episode_keys`).
@@ -58,7 +71,8 @@ def rollout(
     mocap_pos (T+1, n, nmocap, 3), mocap_quat (T+1, n, nmocap, 4) for rendering, and
     the last step's ``pose/<name>`` metrics (n,).
     """
-    reset, step, per_state = compiled_rollout(single, policy, reset, extra)
+    reset, step, per_state = compiled_rollout(single, reset, extra)
+    policy = as_policy(policy)
     state = reset(keys, *reset_args)
     sensors = [f"contact/{n}" for n in shadow_hand.CONTACT_SENSORS]
     has_contacts = all(k in state.metrics for k in sensors)
@@ -70,7 +84,7 @@ def rollout(
 
     keep(state)
     for _ in range(single.episode_length):
-        state = step(state)
+        state = step(state, policy)
         keep(state)
         record["reward"].append(np.asarray(state.reward))
         record["success"].append(np.asarray(state.info["success"]))

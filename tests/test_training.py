@@ -409,13 +409,33 @@ def test_evaluate_loads_the_best_policy_without_compiling(hand_run):
         rows = [r for r in csv.DictReader(f)]
     best_policy = evaluate.load_policy(run_dir, best=True, eval_envs=8)
     best, epoch = best_policy.params, best_policy.epoch
-    latest = evaluate.load_policy(run_dir, eval_envs=8).params
+    latest_policy = evaluate.load_policy(run_dir, eval_envs=8)
+    latest = latest_policy.params
     assert int(best.updates) == float(rows[epoch - 1]["train/updates"])
     if epoch == 2:  # the best is the latest: the very same networks
         for x, y in zip(jax.tree.leaves(best), jax.tree.leaves(latest)):
             np.testing.assert_array_equal(x, y)
     else:
         assert int(best.updates) < int(latest.updates)
+    # Policies of one program roll out through one compiled step: the parameters are
+    # its arguments, not constants baked into a program per policy.
+    from mjx_hands import rollouts
+
+    _, step, _ = rollouts.compiled_rollout(best_policy.single)
+    compiled_before = step._cache_size()
+    # A policy whose actor outputs zeros must act as such through that same program.
+    still = dataclasses.replace(
+        latest, actor_params=jax.tree.map(jnp.zeros_like, latest.actor_params)
+    )
+    policies = [
+        best_policy.act,
+        latest_policy.act,
+        jax.tree_util.Partial(latest_policy.act.func, still),
+    ]
+    keys = rollouts.episode_keys(0, 2)
+    episodes = [rollouts.rollout(best_policy.single, act, keys) for act in policies]
+    assert step._cache_size() - compiled_before <= 1
+    assert not np.allclose(episodes[1]["qpos"][-1], episodes[2]["qpos"][-1])
 
 
 def test_robustness_sweeps_a_trained_policy_over_orientations_and_speeds(hand_run, tmp_path):
@@ -769,7 +789,9 @@ def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
         checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this process has 2"
     ):
         two_devices = types.SimpleNamespace(num_devices=2, checkpoint_tree=algo.checkpoint_tree)
-        run_directory.RunDirectory(config).restore(two_devices, algo.init(jax.random.PRNGKey(0)), 0, 3)
+        run_directory.RunDirectory(config).restore(
+            two_devices, algo.init(jax.random.PRNGKey(0)), 0, 3
+        )
 
 
 @pytest.mark.slow

@@ -379,7 +379,9 @@ class DDPG:
 
     def load_policy(self, ckpt_dir, step: int, verified: bool = False):
         """(act, learner, epoch) of the policy a checkpoint folder (a run's ``checkpoints``
-        or ``best``) holds at ``step``: ``act`` = :meth:`policy` bound to that learner.
+        or ``best``) holds at ``step``: ``act`` = :meth:`policy` bound to that learner as
+        a ``jax.tree_util.Partial`` (the learner stays data: policies of one program
+        share their compiled rollouts).
         Only the learner is read (by path), so checkpoints whose environment state has
         another layout still load; ``verified``: its digest was already checked."""
         like = jax.eval_shape(self.init, jax.random.PRNGKey(0))  # structure only, no compile
@@ -387,7 +389,7 @@ class DDPG:
             ckpt_dir, self.policy_tree(like), step, partial=True, verified=verified
         )
         learner = tree["learner"]
-        return functools.partial(self.policy, learner), learner, int(meta["epoch"])
+        return jax.tree_util.Partial(self.policy, learner), learner, int(meta["epoch"])
 
     def from_checkpoint_trees(
         self, trees: list[dict[str, Any]], fresh: TrainerState
