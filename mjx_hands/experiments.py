@@ -102,8 +102,11 @@ def _check_grid(grid: GridConfig) -> None:
         problems.append(f"--seeds must be positive, got {grid.seeds}")
     if base.reward != "full" or not base.imitation:
         problems.append("--reward/--no-imitation do not apply to a grid; name --variants instead")
-    if base.algo != "ddpg":
-        problems.append(f"grids train DDPG; --algo {base.algo} is not supported")
+    if base.algo not in train_config.LEARNER_OPTIONS:
+        problems.append(
+            f"grids train the project's learner ({', '.join(train_config.LEARNER_OPTIONS)}); "
+            f"--algo {base.algo} is not supported"
+        )
     if problems:
         raise ValueError("; ".join(problems))
 
@@ -123,7 +126,7 @@ def _grid_default(argv: list[str]) -> GridConfig:
             return GridConfig(variants=tuple(saved["variants"]), seeds=saved["seeds"], train=train)
         except (json.JSONDecodeError, KeyError, TypeError) as err:
             raise ValueError(f"{path} is not a grid record this version reads: {err!r}") from err
-    return GridConfig(train=train_config.preset(train_cli.option(argv, "--preset") or "auto"))
+    return GridConfig(train=train_cli.preset_default(argv))
 
 
 def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any]]:

@@ -8,6 +8,7 @@ import sys
 USAGE = """Train a hand-interaction policy: the project's single command.
 
     python train.py --task handshake            # the paper's DDPG, preset by device
+    python train.py --task handshake --algo td3 # TD3's additions and 3-step returns
     python train.py --task et --no-imitation    # an ablation
     python train.py --run-dir runs/x --resume   # continue a run with its own config
     python train.py --run-dir runs/x --resume --epochs 400   # ... and a larger budget
@@ -43,7 +44,16 @@ def default_config(argv: list[str]):
         except TypeError as err:  # a key this version does not know
             raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
         return dataclasses.replace(config, resume=False)
-    return train_config.preset(option(argv, "--preset") or "auto")
+    return preset_default(argv)
+
+
+def preset_default(argv: list[str]):
+    """The preset --preset names (auto by default) for the learner --algo names."""
+    from mjx_hands import train_config
+
+    return train_config.preset(
+        option(argv, "--preset") or "auto", algo=option(argv, "--algo") or "ddpg"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         default = default_config(argv)
         config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
-        if config.algo == "ddpg":
+        if config.algo in train_config.LEARNER_OPTIONS:
             summary = training.run(config)
         else:
             from mjx_hands import brax_agents

@@ -843,6 +843,39 @@ def test_a_damaged_config_json_is_named_on_resume(tmp_path, capsys):
     assert f"{run_dir / 'config.json'} is unreadable" in err
 
 
+def test_td3_names_the_projects_learner_with_its_options_and_ddpg_stays_the_papers(
+    tmp_path, capsys
+):
+    import tyro
+
+    from mjx_hands import experiments, train_cli
+
+    td3_options = dict(
+        twin_critics=True,
+        target_policy_noise=0.2,
+        target_noise_clip=0.5,
+        actor_update_interval=2,
+        n_step=3,
+        layer_norm=True,
+    )
+    for kind in ("cpu", "gpu"):
+        paper, td3 = train_config.preset(kind), train_config.preset(kind, algo="td3")
+        options = ("twin_critics", "target_policy_noise", "actor_update_interval", "n_step")
+        options += ("layer_norm", "num_atoms")
+        assert [getattr(paper.ddpg, k) for k in options] == [False, 0.0, 1, 1, False, 1]
+        assert td3 == dataclasses.replace(
+            paper, algo="td3", ddpg=dataclasses.replace(paper.ddpg, **td3_options)
+        )
+    argv = ["--preset", "cpu", "--algo", "td3", "--ddpg.n-step", "5"]
+    parsed = tyro.cli(train_config.TrainConfig, default=train_cli.default_config(argv), args=argv)
+    assert parsed.ddpg.n_step == 5 and parsed.ddpg.twin_critics  # a flag overrides one option
+    grid = experiments.GridConfig(train=train_cli.preset_default(["--algo=td3", "--preset=cpu"]))
+    assert grid.train == train_config.preset("cpu", algo="td3")
+    refused = ["run", "--algo", "sac", "--preset", "cpu", "--run-dir", str(tmp_path / "g")]
+    assert experiments.main(refused) == 2
+    assert "--algo sac is not supported" in capsys.readouterr().err
+
+
 def test_replay_ratio_sets_the_updates_as_the_env_count_changes():
     cpu, gpu = train_config.preset("cpu"), train_config.preset("gpu")
     for config in (cpu, gpu):  # both presets replay 25.6 transitions per env step
