@@ -6,7 +6,8 @@
 #   BUDGET_S=560 bash benchmarks/gpu_session.sh
 #   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
 #   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
-#   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG vs TD3 options, 5 seeds
+#   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG vs --algo td3, 5 seeds
+#   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
@@ -84,30 +85,44 @@ grid() {
     --out "$OUT/fig4" 2>&1 | tee "$OUT/report.log"
 }
 
+learner_flags() {  # a learner's label -> its flags (the clap's CPU grids used the same)
+  case $1 in
+    ddpg) echo "--algo ddpg" ;;
+    td3) echo "--algo td3" ;;
+    nstep3) echo "--ddpg.n-step 3" ;;
+    twin) echo "--ddpg.twin-critics" ;;
+    layernorm) echo "--ddpg.layer-norm" ;;
+    smoothing) echo "--ddpg.target-policy-noise 0.2 --ddpg.target-noise-clip 0.5" ;;
+    delay) echo "--ddpg.actor-update-interval 2" ;;
+    c51) echo "--ddpg.num-atoms 51" ;;
+    *) echo "unknown learner $1" >&2; return 1 ;;
+  esac
+}
+
 learners() {
-  # The paper's DDPG against TD3's additions (issue evidence): 5 seeds of the full reward
-  # each, the two grids in equal shares of what is left, then `experiments compare`.
+  # The paper's DDPG against --algo td3 (and, with LEARNERS, each option alone): 5 seeds
+  # of the full reward each, the grids in equal shares of what is left, then compare.
   task=${LEARNER_TASK:-handshake}
-  td3="--ddpg.twin-critics --ddpg.target-policy-noise 0.2 --ddpg.actor-update-interval 2 \
-    --ddpg.n-step 3 --ddpg.layer-norm"
-  n=2
-  for learner in ddpg td3; do
+  set -- ${LEARNERS:-ddpg td3}
+  n=$#
+  pairs=""
+  for learner in "$@"; do
+    flags=$(learner_flags "$learner") || return 1
     left=$((BUDGET_S - SECONDS))
     minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
-    n=1
-    options=""; [ "$learner" = td3 ] && options="$td3"
+    n=$((n - 1))
     echo "== learners $learner on $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
     rm -rf "/tmp/learners-$learner"
     timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
       --preset gpu --variants full --seeds 5 --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
       --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
       --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/learners-$learner" \
-      $options ${GRID_ARGS:-} 2>&1 | tee "$OUT/learners-$learner.log"
+      $flags ${GRID_ARGS:-} 2>&1 | tee "$OUT/learners-$learner.log"
     (cd /tmp && find "learners-$learner" -name checkpoints -prune -o -name best -prune -o -type f \
       -print | tar -cf - -T -) | tar -xf - -C "$OUT"
+    pairs="$pairs $learner=$OUT/learners-$learner"
   done
-  python3 -m mjx_hands.experiments compare ddpg="$OUT/learners-ddpg" td3="$OUT/learners-td3" \
-    --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
+  python3 -m mjx_hands.experiments compare $pairs --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
 }
 
 for stage in $STAGES; do
