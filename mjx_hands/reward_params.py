@@ -153,6 +153,22 @@ _VARIANTS = {
 }
 
 
+KNOB_SETS = ("authors", "project")
+"""Where the knobs K_p, K_c and K_alpha come from: ``authors``, the values the authors
+set per task (``tasks.TaskSpec.authors_knobs``); ``project``, the defaults of
+:class:`RewardWeights` for every task (what every run before 2026-12-02 used)."""
+
+
+def task_knobs(task: str, knobs: str = "authors") -> RewardWeights:
+    """The knobs of ``task`` from the set ``knobs`` (:data:`KNOB_SETS`), the rest at
+    :class:`RewardWeights`' defaults."""
+    if knobs not in KNOB_SETS:
+        raise ValueError(f"unknown reward knobs {knobs!r}; expected one of {', '.join(KNOB_SETS)}")
+    if knobs == "project":
+        return RewardWeights()
+    return RewardWeights(**dict(tasks.spec(task).authors_knobs))
+
+
 def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:
     """Named reward configuration of the paper's comparison, built on ``base``'s knobs.
 

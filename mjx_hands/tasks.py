@@ -38,6 +38,11 @@ class TaskSpec:
     sensor its own group (all must touch)."""
     authors_demos: tuple[int, ...] = ()
     """Rows of the authors' release (``interaction_t``) their environment trained on."""
+    authors_knobs: tuple[tuple[str, float], ...] = ()
+    """The reward knobs the authors set for this task (``RewardWeights`` field, value):
+    their config's ``W_pos`` (K_p), ``W_f`` (K_c: their force term charges W_f per
+    required sensor out of contact, a reward of K_c per sensor in contact up to a
+    constant) and ``W_ang`` (K_alpha, per joint and radian)."""
 
     @property
     def contact_rotation_matrix(self) -> np.ndarray:
@@ -50,9 +55,10 @@ class TaskSpec:
 
 _HANDSHAKE_ROTATION = ((0, 0, 1), (0, -1, 0), (1, 0, 0))
 _CLAP_GROUPS = tuple((f"{f}_distal", f"{f}_middle") for f in ("ff", "mf", "rf", "lf"))
-# Required contacts, success rules and demonstration subsets are the authors' (their
-# configs' TOUCH_SENSORS / FORCE_GOALS, success rule and demo lists; evidence in
-# benchmarks/RESULTS.md, "Fidelity to the authors' environment").
+# Required contacts, success rules, demonstration subsets and reward knobs are the
+# authors' (their configs' TOUCH_SENSORS / FORCE_GOALS, success rule, demo lists and
+# W_pos / W_f / W_ang; evidence in benchmarks/RESULTS.md, "Fidelity to the authors'
+# environment" and "Reward knobs").
 REGISTRY = {
     "handshake": TaskSpec(
         name="handshake",
@@ -60,6 +66,7 @@ REGISTRY = {
         required_contacts=("th_middle", "ff_middle", "mf_middle", "rf_middle", "lf_middle"),
         contact_rotation=_HANDSHAKE_ROTATION,
         authors_demos=(0, 1, 2, 7, 8, 9),
+        authors_knobs=(("K_p", 4.0), ("K_c", 0.5), ("K_alpha", 0.0)),
     ),
     "handclap": TaskSpec(
         name="handclap",
@@ -68,6 +75,7 @@ REGISTRY = {
         contact_rotation=_HANDSHAKE_ROTATION,
         contact_groups=_CLAP_GROUPS,
         authors_demos=(1, 2, 3, 5, 7, 8),
+        authors_knobs=(("K_p", 1.0), ("K_c", 0.1), ("K_alpha", 0.5)),
     ),
     "et": TaskSpec(
         name="et",
@@ -75,6 +83,7 @@ REGISTRY = {
         required_contacts=("ff_distal",),
         contact_rotation=((0, 0, 1), (1, 0, 0), (0, 1, 0)),
         authors_demos=(0, 1, 3, 4),
+        authors_knobs=(("K_p", 6.0), ("K_c", 0.5), ("K_alpha", 0.2)),
     ),
 }  # fmt: skip
 TASKS = tuple(REGISTRY)

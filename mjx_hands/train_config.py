@@ -47,6 +47,10 @@ class TrainConfig:
     (no contact term)."""
     imitation: bool = True
     """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
+    knobs: Literal["authors", "project"] = "authors"
+    """Reward knobs K_p, K_c, K_alpha: the authors' values for the task (their configs'
+    W_pos, W_f, W_ang) or the project's former single set (1, 0.2, 0.1), which every run
+    before 2026-12-02 used (their config.json files lack this field and read as it)."""
     mocap: str | None = None
     """Folder of demonstrations; default: the authors' recordings in
     ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
@@ -210,6 +214,7 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
+    data.setdefault("knobs", "project")  # ... and the project's knobs
     ddpg = dict(data.pop("ddpg"))
     for key in ("hidden_sizes", "target_clip", "value_range"):
         if ddpg.get(key) is not None:
@@ -223,6 +228,7 @@ RESUME_FIXED = (
     "task",
     "reward",
     "imitation",
+    "knobs",
     "mocap_source",
     "mocap",
     "demos",

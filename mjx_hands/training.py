@@ -43,6 +43,7 @@ def make_envs(config: TrainConfig, num_devices: int):
             task=config.task,
             reward=config.reward,
             imitation=config.imitation,
+            knobs=config.knobs,
             mocap_source=config.mocap_source,
             mocap_path=config.mocap,
             demos=config.demos,
@@ -164,7 +165,11 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
 
     weights = [
         single.variant_for(
-            env_lib.reward_weights(env_lib.EnvConfig(reward=c.reward, imitation=c.imitation))
+            env_lib.reward_weights(
+                env_lib.EnvConfig(
+                    task=c.task, reward=c.reward, imitation=c.imitation, knobs=c.knobs
+                )
+            )
         )
         for c in configs
     ]

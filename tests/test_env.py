@@ -78,6 +78,7 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     single = env.unwrapped
     cfg, p = single.config, single.params
     data, ep = reset_state.pipeline_state, reset_state.info["episode"]
+
     # The start each env drew (reset's own draw, redone here): starts that penetrated
     # moved earlier by whole back-offs or to step 1; the rest stayed as drawn.
     def drawn_start(key):
@@ -96,10 +97,12 @@ def test_starts_step_back_along_the_demonstration_until_the_hands_are_apart(
     # Independent check by native MuJoCo: every start has the hands apart (those that
     # reached step 1 still touching backed away along the palm line).
     poses = [np.asarray(x) for x in (data.qpos, data.mocap_pos, data.mocap_quat)]
-    depth = np.array([
-        _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
-        for i in range(env.num_envs)
-    ])
+    depth = np.array(
+        [
+            _native_deepest_penetration(single.mj_model, *(x[i] for x in poses))
+            for i in range(env.num_envs)
+        ]
+    )
     # (0.5 mm: float32 MJX against float64 native at the 1 mm limit.)
     assert depth.max() < cfg.start_max_penetration + 5e-4, depth.max()
     back = drawn[moved] - start[moved]
@@ -238,7 +241,10 @@ def test_contact_sensors_fire_when_hands_meet_and_not_when_apart(
         _, readings = run(moved)
         readings = np.asarray(readings)
         native = _native_sensors(
-            single, np.asarray(moved.qpos), np.asarray(moved.mocap_pos), np.asarray(moved.mocap_quat)
+            single,
+            np.asarray(moved.qpos),
+            np.asarray(moved.mocap_pos),
+            np.asarray(moved.mocap_quat),
         )
         assert set(np.flatnonzero(readings)) <= set(np.flatnonzero(native))
         fired.append(readings)
@@ -350,17 +356,28 @@ def test_target_tilt_angle_is_exact_or_gaussian_about_uniform_axes():
     np.testing.assert_allclose(np.asarray(zero), np.tile([1.0, 0, 0, 0], (8, 1)), atol=1e-7)
 
 
-
 def test_the_reward_is_given_one_way():
     """Variant and imitation, or every knob as weights; both at once is refused."""
     import dataclasses
 
     from mjx_hands import reward_params as rp
 
-    cfg = env_lib.EnvConfig(task="et", reward="baseline1", imitation=False)
+    cfg = env_lib.EnvConfig(task="et", reward="baseline1", imitation=False, knobs="project")
     want = dataclasses.replace(rp.variant("baseline1"), imitation=False)
     assert env_lib.reward_weights(cfg) == want
-    assert env_lib.reward_weights(env_lib.EnvConfig(task="et")) == rp.variant("full")
+    project = env_lib.EnvConfig(task="et", knobs="project")
+    assert env_lib.reward_weights(project) == rp.variant("full")
+    # By default each task has the knobs of the authors' config (W_pos, W_f, W_ang).
+    authors = {"handshake": (4.0, 0.5, 0.0), "handclap": (1.0, 0.1, 0.5), "et": (6.0, 0.5, 0.2)}
+    for task, (k_p, k_c, k_alpha) in authors.items():
+        for variant in ("full", "baseline1", "baseline2"):
+            weights = env_lib.reward_weights(env_lib.EnvConfig(task=task, reward=variant))
+            assert (weights.K_p, weights.K_c, weights.K_alpha) == (k_p, k_c, k_alpha)
+            assert weights == rp.variant(
+                variant, rp.RewardWeights(K_p=k_p, K_c=k_c, K_alpha=k_alpha)
+            )
+    with pytest.raises(ValueError, match="unknown reward knobs 'mine'"):
+        env_lib.reward_weights(env_lib.EnvConfig(knobs="mine"))
     mine = rp.RewardWeights(K_p=2.0)
     assert env_lib.reward_weights(env_lib.EnvConfig(weights=mine)) == mine
     with pytest.raises(ValueError, match="give either weights or reward/imitation"):

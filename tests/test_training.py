@@ -130,6 +130,9 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
     config = json.loads((run_dir / "config.json").read_text())
     assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
     assert train_config.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
+    # A run written before the authors' knobs were the default reads as the project's.
+    older = {k: v for k, v in config.items() if k != "knobs"}
+    assert config["knobs"] == "authors" and train_config.config_from_json(older).knobs == "project"
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert "eval/success" in rows[0] and len(rows) == 3
     assert list((run_dir / "tensorboard").glob("events.out.tfevents.*"))
