@@ -28,6 +28,7 @@ import tyro
 from mjx_hands import (
     brax_agents,
     checkpoint,
+    compile_cache,
     contact_profile,
     run_directory,
     train_config,
@@ -218,6 +219,7 @@ def _check_video_size(model, args: EvalArgs) -> None:
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     args = tyro.cli(EvalArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
+    compile_cache.enable()
     run_dir = Path(args.run_dir)
     try:
         if not 0 <= args.video_episodes <= args.episodes:

@@ -33,7 +33,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tyro
 
-from mjx_hands import cli, run_directory, train_cli, train_config, training
+from mjx_hands import cli, compile_cache, run_directory, train_cli, train_config, training
 
 VARIANTS: dict[str, tuple[str, bool]] = {
     "full": ("full", True),
@@ -190,6 +190,7 @@ def run_main(argv: list[str]) -> int:
     try:
         default = _grid_default(argv)
         grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
+        compile_cache.enable()
         summaries = run_grid(grid)
     except training.TrainingDiverged as err:
         print(f"error: {err}", file=sys.stderr)

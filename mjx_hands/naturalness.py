@@ -38,7 +38,7 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate, experiments, rollouts
+from mjx_hands import checkpoint, compile_cache, evaluate, experiments, rollouts
 
 METRICS = ("dtw", "jerk", "path_ratio", "final_pose_error")
 """Per-episode metrics; lower is more natural (closer to the demonstrations) for all."""
@@ -140,7 +140,9 @@ def policy_metrics(single, policy, episodes: int, seed: int) -> dict[str, float]
             "start": ep.start_step,
         }
 
-    trajectory = rollouts.rollout(single, policy, rollouts.episode_keys(seed, episodes), extra=extra)
+    trajectory = rollouts.rollout(
+        single, policy, rollouts.episode_keys(seed, episodes), extra=extra
+    )
     dt = single.config.control_dt
     demos = [demo_at_control_rate(d.actor_points, d.fps, dt) for d in single.demos]
     contact_end = [math.floor(d.contact_end / d.fps / dt) for d in single.demos]
@@ -258,6 +260,7 @@ def main(argv: list[str] | None = None) -> int:
     args = tyro.cli(
         NaturalnessArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__
     )
+    compile_cache.enable()
     try:
         if args.episodes < 1:
             raise ValueError(f"--episodes {args.episodes} must be positive")

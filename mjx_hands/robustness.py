@@ -35,7 +35,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate, rollouts
+from mjx_hands import checkpoint, compile_cache, evaluate, rollouts
 from mjx_hands import env as env_lib
 
 ORIENTATION_FILE = "robustness_orientation"
@@ -284,6 +284,7 @@ def main(argv: list[str] | None = None) -> int:
     args = tyro.cli(
         RobustnessArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__
     )
+    compile_cache.enable()
     try:
         check_args(args)
         runs = load_runs(args)

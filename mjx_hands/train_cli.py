@@ -59,13 +59,14 @@ def preset_default(argv: list[str]):
 def main(argv: list[str] | None = None) -> int:
     import tyro
 
-    from mjx_hands import checkpoint, train_config, training
+    from mjx_hands import checkpoint, compile_cache, train_config, training
     from mjx_hands.mocap import MocapError
 
     argv = sys.argv[1:] if argv is None else argv
     try:
         default = default_config(argv)
         config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
+        compile_cache.enable()
         if config.algo in train_config.LEARNER_OPTIONS:
             summary = training.run(config)
         else:

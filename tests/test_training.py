@@ -853,14 +853,14 @@ def test_td3_names_the_projects_learner_with_its_options_and_ddpg_stays_the_pape
 
     from mjx_hands import experiments, train_cli
 
-    td3_options = dict(
-        twin_critics=True,
-        target_policy_noise=0.2,
-        target_noise_clip=0.5,
-        actor_update_interval=2,
-        n_step=3,
-        layer_norm=True,
-    )
+    td3_options = {
+        "twin_critics": True,
+        "target_policy_noise": 0.2,
+        "target_noise_clip": 0.5,
+        "actor_update_interval": 2,
+        "n_step": 3,
+        "layer_norm": True,
+    }
     for kind in ("cpu", "gpu"):
         paper, td3 = train_config.preset(kind), train_config.preset(kind, algo="td3")
         options = ("twin_critics", "target_policy_noise", "actor_update_interval", "n_step")

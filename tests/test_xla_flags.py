@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 from mjx_hands import xla_flags
 
@@ -29,7 +30,12 @@ def _probe(mode: str, xla_flags_env: str | None) -> dict:
     if xla_flags_env is not None:
         env["XLA_FLAGS"] = xla_flags_env
     out = subprocess.run(
-        [sys.executable, "-c", PROBE, mode], env=env, capture_output=True, text=True, timeout=120, check=False
+        [sys.executable, "-c", PROBE, mode],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
     )
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout.splitlines()[-1])
@@ -74,3 +80,34 @@ def test_only_a_registered_flag_counts_not_a_leftover_proto_field(tmp_path, monk
     assert not xla_flags._jaxlib_knows(name.decode())
     (tmp_path / "libflags.so").write_bytes(b"Dump IR.\x00" + name + b"\x00Other help.")
     assert xla_flags._jaxlib_knows(name.decode())
+
+
+CACHE_PROBE = """
+import jax
+from mjx_hands import compile_cache
+print(compile_cache.enable(), jax.config.jax_compilation_cache_dir)
+jax.jit(lambda x: x * 2.0)(1.0).block_until_ready()  # compiled with the cache in use
+"""
+
+
+def test_commands_cache_compiled_programs_in_a_folder_the_user_can_override(tmp_path):
+    """The commands put JAX's persistent cache in the user's cache folder, unless the
+    user named another one or turned caching off."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    env |= {"XDG_CACHE_HOME": str(tmp_path), "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}
+    mine = tmp_path / "mine"
+    cases = [
+        ({}, str(tmp_path / "mjx_hands" / "jax")),
+        ({"JAX_COMPILATION_CACHE_DIR": str(mine)}, str(mine)),
+        ({"JAX_ENABLE_COMPILATION_CACHE": "false"}, None),
+    ]
+    for extra, folder in cases:
+        out = subprocess.run(
+            [sys.executable, "-c", CACHE_PROBE], env=env | extra, capture_output=True, text=True,
+            timeout=120, check=False,
+        )  # fmt: skip
+        assert out.returncode == 0, out.stderr
+        used, configured = out.stdout.split()[-2:]
+        assert used == str(folder)
+        if folder is not None:
+            assert configured == folder and any(Path(folder).iterdir())  # written there

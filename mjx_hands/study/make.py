@@ -26,7 +26,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, evaluate, rollouts
+from mjx_hands import checkpoint, compile_cache, evaluate, rollouts
 from mjx_hands import env as env_lib
 from mjx_hands.study import layout
 
@@ -167,6 +167,7 @@ def make(args: MakeArgs, log=None) -> layout.Study:
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     args = tyro.cli(MakeArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
+    compile_cache.enable()
     try:
         study = make(args)
     except (checkpoint.CheckpointError, ValueError, FileNotFoundError, FileExistsError) as err:
