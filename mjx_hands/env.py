@@ -158,7 +158,7 @@ def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
                 "given together; weights hold every knob: give either weights or reward/imitation"
             )
         return config.weights
-    base = reward_params.task_knobs(config.task, config.knobs)
+    base = reward_params.task_weights(config.task, config.knobs)
     weights = reward_params.variant(config.reward, base)
     return weights if config.imitation else dataclasses.replace(weights, imitation=False)
 
@@ -174,9 +174,8 @@ class EnvConfig:
     'no_imitation'."""
     imitation: bool = True
     """Imitation terms r_pI, r_αI on top of the variant (False: any variant without them)."""
-    knobs: str = "authors"
-    """Reward knobs K_p, K_c, K_alpha: the authors' per task or the project's former
-    single set (``reward_params.KNOB_SETS``)."""
+    knobs: reward_params.RewardKnobs | None = None
+    """The reward's six knobs; None (or a None knob) takes the task's own."""
     weights: reward_params.RewardWeights | None = None
     """Every reward knob at once, instead of ``reward``, ``imitation`` and ``knobs``
     (None: the variant's, from ``knobs``)."""

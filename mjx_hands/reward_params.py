@@ -153,20 +153,40 @@ _VARIANTS = {
 }
 
 
-KNOB_SETS = ("authors", "project")
-"""Where the knobs K_p, K_c and K_alpha come from: ``authors``, the values the authors
-set per task (``tasks.TaskSpec.authors_knobs``); ``project``, the defaults of
-:class:`RewardWeights` for every task (what every run before 2026-12-02 used)."""
+KNOB_NAMES = ("K_p", "K_alpha", "K_c", "K_a", "K_pI", "K_alphaI")
 
 
-def task_knobs(task: str, knobs: str = "authors") -> RewardWeights:
-    """The knobs of ``task`` from the set ``knobs`` (:data:`KNOB_SETS`), the rest at
-    :class:`RewardWeights`' defaults."""
-    if knobs not in KNOB_SETS:
-        raise ValueError(f"unknown reward knobs {knobs!r}; expected one of {', '.join(KNOB_SETS)}")
-    if knobs == "project":
-        return RewardWeights()
-    return RewardWeights(**dict(tasks.spec(task).authors_knobs))
+@dataclasses.dataclass(frozen=True)
+class RewardKnobs:
+    """The paper's six reward knobs, the part of the reward Algorithm 1 leaves to the
+    user (meanings: :class:`RewardWeights`). None takes the task's own value
+    (``tasks.TaskSpec.reward_knobs``, else :class:`RewardWeights`' default)."""
+
+    K_p: float | None = None
+    """Goal-position scale (the closest fingertip's weight)."""
+    K_alpha: float | None = None
+    """Goal joint-angle weight, per joint and radian."""
+    K_c: float | None = None
+    """Reward per required contact sensor in contact."""
+    K_a: float | None = None
+    """Weight of every squared control in the reward."""
+    K_pI: float | None = None
+    """Imitation-position scale, relative to the position weights."""
+    K_alphaI: float | None = None
+    """Imitation-angle scale, relative to the angle weights."""
+
+
+def task_weights(task: str, knobs: RewardKnobs | None = None) -> RewardWeights:
+    """The full reward's weights for ``task``: ``knobs`` where given, the task's own
+    knobs elsewhere."""
+    given = {k: v for k, v in dataclasses.asdict(knobs or RewardKnobs()).items() if v is not None}
+    return RewardWeights(**(dict(tasks.spec(task).reward_knobs) | given))
+
+
+def task_knobs(task: str, knobs: RewardKnobs | None = None) -> RewardKnobs:
+    """Every knob of ``task`` as a number (see :func:`task_weights`)."""
+    weights = task_weights(task, knobs)
+    return RewardKnobs(**{name: float(getattr(weights, name)) for name in KNOB_NAMES})
 
 
 def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:

@@ -12,7 +12,7 @@ from typing import Any, Literal
 
 import jax
 
-from mjx_hands import checkpoint, tasks
+from mjx_hands import checkpoint, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
@@ -47,10 +47,10 @@ class TrainConfig:
     (no contact term)."""
     imitation: bool = True
     """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
-    knobs: Literal["authors", "project"] = "authors"
-    """Reward knobs K_p, K_c, K_alpha: the authors' values for the task (their configs'
-    W_pos, W_f, W_ang) or the project's former single set (1, 0.2, 0.1), which every run
-    before 2026-12-02 used (their config.json files lack this field and read as it)."""
+    knobs: reward_params.RewardKnobs = reward_params.RewardKnobs()
+    """The reward's six knobs (``--knobs.K-p 4`` ...); unset ones take the task's own
+    (``tasks.TaskSpec.reward_knobs``: the handshake the authors' K_p 4, K_c 0.5, K_alpha
+    0; the clap and E.T. K_p 1, K_c 0.2, K_alpha 0.1). config.json records every value."""
     mocap: str | None = None
     """Folder of demonstrations; default: the authors' recordings in
     ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
@@ -129,6 +129,10 @@ class TrainConfig:
                 f"--target-rotation-noise must be a finite number >= 0, got "
                 f"{self.target_rotation_noise}"
             )
+        try:
+            reward_params.task_weights(self.task, self.knobs)
+        except (ValueError, TypeError) as err:
+            problems.append(f"--knobs: {err}")
         if self.mocap is not None and not Path(self.mocap).is_dir():
             problems.append(f"--mocap {self.mocap}: no such folder")
         if problems:
@@ -207,19 +211,37 @@ def read_config_json(path: Path) -> dict[str, Any]:
     return data
 
 
+def resolved(config: TrainConfig) -> TrainConfig:
+    """``config`` with every reward knob a number (the task's own where unset)."""
+    return dataclasses.replace(config, knobs=reward_params.task_knobs(config.task, config.knobs))
+
+
 def config_to_json(config: TrainConfig) -> dict[str, Any]:
-    return dataclasses.asdict(config)
+    """``config`` as JSON data, its knobs :func:`resolved` (a run keeps its reward when a
+    task's own knobs change later)."""
+    return dataclasses.asdict(resolved(config))
 
 
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
-    data.setdefault("knobs", "project")  # ... and the project's knobs
+    data["knobs"] = _knobs_from_json(data.get("knobs"), data.get("task", "handshake"))
     ddpg = dict(data.pop("ddpg"))
     for key in ("hidden_sizes", "target_clip", "value_range"):
         if ddpg.get(key) is not None:
             ddpg[key] = tuple(ddpg[key])
     return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
+
+
+def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
+    """Knobs as config.json holds them. Runs from before they were recorded trained with
+    ``RewardWeights``' defaults; grids started on 2026-12-02 may name a set."""
+    if value is None or value == "project":
+        defaults = reward_params.RewardWeights()
+        value = {name: getattr(defaults, name) for name in reward_params.KNOB_NAMES}
+    elif value == "authors":
+        value = dict(tasks.spec(task).authors_knobs)
+    return reward_params.task_knobs(task, reward_params.RewardKnobs(**value))
 
 
 # Settings a resumed run must share with its checkpoint: they fix the task, the physics,

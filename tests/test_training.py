@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjx_hands import brax_agents, checkpoint, run_directory, train_config, training
+from mjx_hands import brax_agents, checkpoint, reward_params, run_directory, train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
 from mjx_hands.point_reach import PointReach
@@ -129,10 +129,20 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
     )
     config = json.loads((run_dir / "config.json").read_text())
     assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
-    assert train_config.config_from_json(config) == _config(run_dir, epochs=2, eval_every=1)
-    # A run written before the authors' knobs were the default reads as the project's.
+    expected = _config(run_dir, epochs=2, eval_every=1)
+    assert train_config.config_from_json(config) == train_config.resolved(expected)
+    # Every reward knob is recorded as a number; runs from before read as the defaults
+    # they trained with, and a named set (grids of 2026-12-02) as its numbers.
+    recorded = train_config.config_from_json(config).knobs
+    assert recorded == reward_params.task_knobs("handshake") and recorded.K_p == 4.0
     older = {k: v for k, v in config.items() if k != "knobs"}
-    assert config["knobs"] == "authors" and train_config.config_from_json(older).knobs == "project"
+    assert train_config.config_from_json(older).knobs == reward_params.task_knobs("handclap")
+    named = config | {"knobs": "authors", "task": "et"}
+    assert train_config.config_from_json(named).knobs.K_p == 6.0
+    with pytest.raises(ValueError, match="--knobs: K_alpha must be"):
+        dataclasses.replace(
+            train_config.TrainConfig(), knobs=reward_params.RewardKnobs(K_alpha=-1.0)
+        )
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert "eval/success" in rows[0] and len(rows) == 3
     assert list((run_dir / "tensorboard").glob("events.out.tfevents.*"))
@@ -593,7 +603,7 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     config = _config(run_dir, epochs=1, eval_every=1, seed=5)
     training.run(config, out=io.StringIO(), env_factory=point_factory)
     resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
-    assert resumed == config  # the command line's --epochs is applied by tyro on top
+    assert resumed == train_config.resolved(config)  # tyro applies --epochs on top
     fresh = train_cli.default_config(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
     assert fresh == train_config.preset("cpu")
 
