@@ -6,7 +6,7 @@
 #   BUDGET_S=560 bash benchmarks/gpu_session.sh
 #   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
 #   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
-#   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG vs --algo td3, 5 seeds
+#   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG, LayerNorm, td3: 5 seeds each
 #   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
@@ -103,7 +103,7 @@ learners() {
   # The paper's DDPG against --algo td3 (and, with LEARNERS, each option alone): 5 seeds
   # of the full reward each, the grids in equal shares of what is left, then compare.
   task=${LEARNER_TASK:-handshake}
-  set -- ${LEARNERS:-ddpg td3}
+  set -- ${LEARNERS:-ddpg layernorm td3}
   n=$#
   pairs=""
   for learner in "$@"; do
