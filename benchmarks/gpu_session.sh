@@ -101,7 +101,8 @@ learner_flags() {  # a learner's label -> its flags (the clap's CPU grids used t
 
 learners() {
   # The paper's DDPG against --algo td3 (and, with LEARNERS, each option alone): 5 seeds
-  # of the full reward each, the grids in equal shares of what is left, then compare.
+  # each (the authors' configuration, no imitation, unless LEARNER_VARIANT), the grids in
+  # equal shares of what is left, then compare.
   task=${LEARNER_TASK:-handshake}
   set -- ${LEARNERS:-ddpg layernorm td3}
   n=$#
@@ -114,7 +115,7 @@ learners() {
     echo "== learners $learner on $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
     rm -rf "/tmp/learners-$learner"
     timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
-      --preset gpu --variants full --seeds 5 --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
+      --preset gpu --variants "${LEARNER_VARIANT:-no_imitation}" --seeds 5 --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
       --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
       --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/learners-$learner" \
       $flags ${GRID_ARGS:-} 2>&1 | tee "$OUT/learners-$learner.log"
