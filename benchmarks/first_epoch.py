@@ -36,6 +36,7 @@ def launch(run_dir: Path, physics: str, task: str, cache: Path | None, extra: li
     """One ``train.py`` process; its wall clock and the run's clock at epoch 1."""
     env = dict(os.environ)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    env.pop("JAX_ENABLE_COMPILATION_CACHE", None)
     if cache is not None:
         env["JAX_COMPILATION_CACHE_DIR"] = str(cache)
     else:  # off, even where the commands would default to a folder
@@ -48,7 +49,9 @@ def launch(run_dir: Path, physics: str, task: str, cache: Path | None, extra: li
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(args)} failed:\n{done.stderr[-3000:]}")
     with open(run_dir / "metrics.csv") as f:
-        first = next(csv.DictReader(f))
+        first = next(csv.DictReader(f), None)
+    if first is None:
+        raise RuntimeError(f"{run_dir}/metrics.csv has no epoch")
     files = sorted(cache.iterdir()) if cache is not None and cache.is_dir() else []
     return {
         "process_seconds": wall,

@@ -101,7 +101,7 @@ learner_flags() {  # a learner's label -> its flags (the clap's CPU grids used t
 
 learners() {
   # The paper's DDPG against --algo td3 (and, with LEARNERS, each option alone): 5 seeds
-  # each (the authors' configuration, no imitation, unless LEARNER_VARIANT), the grids in
+  # each (without imitation, as the authors' configs, unless LEARNER_VARIANT), the grids in
   # equal shares of what is left, then compare.
   task=${LEARNER_TASK:-handshake}
   set -- ${LEARNERS:-ddpg layernorm td3}

@@ -150,12 +150,14 @@ def reflect_into_box(
 
 
 def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
-    """The reward knobs ``config`` asks for: its ``weights``, or its variant and imitation."""
+    """The reward weights ``config`` asks for: its ``weights``, or its task's knobs (with
+    ``knobs`` over them) in its variant, with or without imitation."""
     if config.weights is not None:
-        if config.reward != "full" or not config.imitation:
+        if config.reward != "full" or not config.imitation or config.knobs is not None:
             raise ValueError(
-                f"EnvConfig: reward={config.reward!r}, imitation={config.imitation} and weights "
-                "given together; weights hold every knob: give either weights or reward/imitation"
+                f"EnvConfig: reward={config.reward!r}, imitation={config.imitation}, "
+                f"knobs={config.knobs} and weights given together; weights hold every knob: "
+                "give either weights or reward/imitation/knobs"
             )
         return config.weights
     base = reward_params.task_weights(config.task, config.knobs)

@@ -132,7 +132,7 @@ def restore_run(run_dir: Path, step: int | None = None, eval_envs: int | None = 
     algo, single, config, ckpt_dir, step, meta = _checkpointed_learner(
         Path(run_dir), step, eval_envs, best=False
     )
-    like = jax.eval_shape(algo.init, jax.random.PRNGKey(0))  # structure only, no compile
+    like = algo.state_shapes
     partial = meta.get("contents") == "policy"
     like_tree = (
         algo.policy_tree(like) if partial else algo.checkpoint_tree(like, config.save_replay)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import math
 import sys
@@ -125,13 +126,13 @@ def episode_metrics(
 
 
 # -------------------------------------------------------------- on a policy
-def policy_metrics(single, policy, episodes: int, seed: int) -> dict[str, float]:
-    """Mean of each metric over ``episodes`` evaluation episodes of ``policy``, plus
-    ``REFERENCES``: jerk and path ratio of the demonstration segments they are compared
-    with (the demonstration the episode started on, from its start step to the end of
-    its demonstrated contact), at the same rate."""
+@functools.lru_cache(maxsize=4)
+def hand_points_record(single):
+    """state -> what the metrics read at every step: the hand's points and goals in the
+    target palm's frame, the episode's demonstration and start step. One object per env,
+    so ``rollouts`` compiles once for every policy of one program."""
 
-    def extra(state):
+    def record(state):
         ep = state.info["episode"]
         return {
             "points": single.points_in_target_frame(state),
@@ -140,9 +141,17 @@ def policy_metrics(single, policy, episodes: int, seed: int) -> dict[str, float]
             "start": ep.start_step,
         }
 
-    trajectory = rollouts.rollout(
-        single, policy, rollouts.episode_keys(seed, episodes), extra=extra
-    )
+    return record
+
+
+def policy_metrics(single, policy, episodes: int, seed: int) -> dict[str, float]:
+    """Mean of each metric over ``episodes`` evaluation episodes of ``policy``, plus
+    ``REFERENCES``: jerk and path ratio of the demonstration segments they are compared
+    with (the demonstration the episode started on, from its start step to the end of
+    its demonstrated contact), at the same rate."""
+
+    keys = rollouts.episode_keys(seed, episodes)
+    trajectory = rollouts.rollout(single, policy, keys, extra=hand_points_record(single))
     dt = single.config.control_dt
     demos = [demo_at_control_rate(d.actor_points, d.fps, dt) for d in single.demos]
     contact_end = [math.floor(d.contact_end / d.fps / dt) for d in single.demos]

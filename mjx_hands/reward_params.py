@@ -139,7 +139,7 @@ class RewardWeights:
             raise ValueError(
                 f"position_points must be 'fingertips' or 'palm', got {self.position_points!r}"
             )
-        for name in ("K_p", "K_alpha", "K_c", "K_a", "K_pI", "K_alphaI"):
+        for name in KNOB_NAMES:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")

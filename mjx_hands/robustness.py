@@ -25,6 +25,7 @@ sweep compiles once per run.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import sys
@@ -136,10 +137,7 @@ def run_episodes(
     pad_rows = lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]) if pad else x
     flat_keys, flat_tilts, flat_speeds = map(pad_rows, (flat_keys, flat_tilts, flat_speeds))
 
-    if speeds is None:
-        reset = jax.vmap(lambda key, tilt, speed: env.reset_with(key, tilt))
-    else:
-        reset = jax.vmap(env.reset_with)
+    reset = sweep_reset(env, moving=speeds is not None)
     final, reached = [], []
     for start in range(0, total + pad, size):
         part = slice(start, start + size)
@@ -160,6 +158,28 @@ def run_episodes(
     }
 
 
+@functools.lru_cache(maxsize=8)
+def sweep_reset(env, moving: bool):
+    """The batched reset (keys, tilts, speeds) of a sweep, one object per env and kind,
+    so that ``rollouts`` compiles a sweep once for every policy of one program."""
+    if moving:
+        return jax.vmap(env.reset_with)
+    return jax.vmap(lambda key, tilt, speed: env.reset_with(key, tilt))
+
+
+@functools.lru_cache(maxsize=4)
+def moving_target_env(env, turn_period: float, motion_box: tuple[float, float, float]):
+    """``env`` with a target that moves (its speed is data of each reset), one object per
+    setting (see :func:`sweep_reset`)."""
+    config = dataclasses.replace(
+        env.config,
+        target_speed=0.0,
+        target_turn_period=turn_period,
+        target_motion_box=motion_box,
+    )
+    return env_lib.HandInteractionEnv(config)
+
+
 def orientation_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     """Success per (pitch, yaw) cell of one policy: arrays (n_pitch, n_yaw)."""
     angles = angle_grid(args.max_angle_deg, args.angle_step_deg)
@@ -177,14 +197,7 @@ def orientation_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
 
 def motion_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     """Success per speed of one policy: arrays (n_speeds,)."""
-    moving = env_lib.HandInteractionEnv(
-        dataclasses.replace(
-            env.config,
-            target_speed=0.0,
-            target_turn_period=args.turn_period,
-            target_motion_box=tuple(args.motion_box),
-        )
-    )
+    moving = moving_target_env(env, args.turn_period, tuple(args.motion_box))
     speeds = np.asarray(args.speeds, np.float64)
     identity = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (speeds.size, 1))
     print(f"  motion: {speeds.size} speeds x {args.episodes} episodes", file=log, flush=True)

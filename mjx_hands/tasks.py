@@ -57,6 +57,7 @@ class TaskSpec:
 
 
 _HANDSHAKE_ROTATION = ((0, 0, 1), (0, -1, 0), (1, 0, 0))
+_HANDSHAKE_AUTHORS_KNOBS = (("K_p", 4.0), ("K_c", 0.5), ("K_alpha", 0.0))
 _CLAP_GROUPS = tuple((f"{f}_distal", f"{f}_middle") for f in ("ff", "mf", "rf", "lf"))
 # Required contacts, success rules, demonstration subsets and reward knobs are the
 # authors' (their configs' TOUCH_SENSORS / FORCE_GOALS, success rule, demo lists and
@@ -69,9 +70,9 @@ REGISTRY = {
         required_contacts=("th_middle", "ff_middle", "mf_middle", "rf_middle", "lf_middle"),
         contact_rotation=_HANDSHAKE_ROTATION,
         authors_demos=(0, 1, 2, 7, 8, 9),
-        authors_knobs=(("K_p", 4.0), ("K_c", 0.5), ("K_alpha", 0.0)),
+        authors_knobs=_HANDSHAKE_AUTHORS_KNOBS,
         # The authors' knobs: 0.66 at the end after 45 epochs against 0.17 +- 0.08.
-        reward_knobs=(("K_p", 4.0), ("K_c", 0.5), ("K_alpha", 0.0)),
+        reward_knobs=_HANDSHAKE_AUTHORS_KNOBS,
     ),
     "handclap": TaskSpec(
         name="handclap",

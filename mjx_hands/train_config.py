@@ -30,10 +30,10 @@ LEARNER_OPTIONS: dict[str, dict[str, Any]] = {
 }
 """The project's own jitted learner under its names, as ``DDPGConfig`` options over a
 preset's: ``ddpg`` the paper's DDPG unchanged; ``td3`` adds TD3's clipped double Q,
-target smoothing and delayed actor, 3-step returns and critic LayerNorm (the
-combination that beat the paper's DDPG on the hand clap over 5 seeds: 0.91 +- 0.04 at
-the end against 0.84 +- 0.03, every seed reached 90 %; benchmarks/RESULTS.md,
-"Learners"). ``--ddpg.*`` flags still override each option."""
+target smoothing and delayed actor, 3-step returns and LayerNorm (on the hand clap over
+5 seeds 0.91 +- 0.04 at the end against DDPG's 0.84 +- 0.03; LayerNorm alone, 0.95 +-
+0.02, did better: benchmarks/RESULTS.md, "Learners"). ``--ddpg.*`` flags still override
+each option."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,10 +129,11 @@ class TrainConfig:
                 f"--target-rotation-noise must be a finite number >= 0, got "
                 f"{self.target_rotation_noise}"
             )
-        try:
-            reward_params.task_weights(self.task, self.knobs)
-        except (ValueError, TypeError) as err:
-            problems.append(f"--knobs: {err}")
+        if self.task in tasks.TASKS:  # an unknown task is tyro's (or the env's) to name
+            try:
+                reward_params.task_weights(self.task, self.knobs)
+            except (ValueError, TypeError) as err:
+                problems.append(f"--knobs: {err}")
         if self.mocap is not None and not Path(self.mocap).is_dir():
             problems.append(f"--mocap {self.mocap}: no such folder")
         if problems:
@@ -234,8 +235,9 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
 
 
 def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
-    """Knobs as config.json holds them. Runs from before they were recorded trained with
-    ``RewardWeights``' defaults; grids started on 2026-12-02 may name a set."""
+    """Knobs as config.json (or a checkpoint's metadata) holds them. Runs from before
+    they were recorded trained with ``RewardWeights``' defaults; runs started on
+    2026-12-02 may name a set ("authors" or "project")."""
     if value is None or value == "project":
         defaults = reward_params.RewardWeights()
         value = {name: getattr(defaults, name) for name in reward_params.KNOB_NAMES}
@@ -305,8 +307,8 @@ def check_population(configs: list[TrainConfig]) -> None:
         raise ValueError(f"members need distinct run directories, got {dirs}")
     if any(c.algo not in LEARNER_OPTIONS for c in configs):
         raise ValueError(
-            f"training.run trains {' and '.join(LEARNER_OPTIONS)}; --algo {configs[0].algo} runs through "
-            "mjx_hands.brax_agents.run (train.py dispatches by --algo)"
+            f"training.run trains {' and '.join(LEARNER_OPTIONS)}; --algo {configs[0].algo} "
+            "runs through mjx_hands.brax_agents.run (train.py dispatches by --algo)"
         )
 
 
@@ -336,5 +338,6 @@ RUN_LOOP_FIELDS = {
 
 
 def program_config(config: TrainConfig) -> TrainConfig:
-    """``config`` with the fields that leave its compiled programs unchanged at defaults."""
-    return dataclasses.replace(config, **RUN_LOOP_FIELDS)
+    """``config`` with the fields that leave its compiled programs unchanged at defaults,
+    its knobs :func:`resolved` (unset and recorded knobs make the same program)."""
+    return resolved(dataclasses.replace(config, **RUN_LOOP_FIELDS))

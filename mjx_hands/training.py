@@ -229,7 +229,8 @@ def _progress_line(
 
 
 def run(config: TrainConfig, out=None, env_factory=None) -> dict[str, Any]:
-    """Train DDPG according to ``config``; returns a summary (final metrics, paths).
+    """Train the project's learner (``ddpg`` or ``td3``) according to ``config``; returns
+    a summary (final metrics, paths).
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment). Brax's
     SAC and PPO run through :func:`mjx_hands.brax_agents.run` (train.py picks).

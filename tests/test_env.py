@@ -376,7 +376,7 @@ def test_the_reward_is_given_one_way():
     assert rp.task_knobs("handclap") == rp.RewardKnobs(1.0, 0.1, 0.2, 0.0, 0.5, 0.5)
     mine = rp.RewardWeights(K_p=2.0)
     assert env_lib.reward_weights(env_lib.EnvConfig(weights=mine)) == mine
-    with pytest.raises(ValueError, match="give either weights or reward/imitation"):
+    with pytest.raises(ValueError, match="give either weights or reward/imitation/knobs"):
         env_lib.reward_weights(env_lib.EnvConfig(reward="baseline2", weights=mine))
 
 

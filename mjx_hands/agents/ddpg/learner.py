@@ -353,6 +353,13 @@ class DDPG:
         return jax.tree.map(lambda x: x.reshape((members, n) + x.shape[1:]), stepped)
 
     # ------------------------------------------------------------------ init
+    @functools.cached_property
+    def state_shapes(self) -> TrainerState:
+        """The trainer state's structure, shapes and dtypes (``jax.eval_shape`` of
+        :meth:`init`; traced once per learner, nothing compiled): what a checkpoint is
+        restored into."""
+        return jax.eval_shape(self.init, jax.random.PRNGKey(0))
+
     # ----------------------------------------------------------- checkpoint layout
     def checkpoint_tree(
         self, state: TrainerState, save_replay: bool, index: int = 0
@@ -384,9 +391,8 @@ class DDPG:
         share their compiled rollouts).
         Only the learner is read (by path), so checkpoints whose environment state has
         another layout still load; ``verified``: its digest was already checked."""
-        like = jax.eval_shape(self.init, jax.random.PRNGKey(0))  # structure only, no compile
         tree, meta = checkpoint.restore(
-            ckpt_dir, self.policy_tree(like), step, partial=True, verified=verified
+            ckpt_dir, self.policy_tree(self.state_shapes), step, partial=True, verified=verified
         )
         learner = tree["learner"]
         return jax.tree_util.Partial(self.policy, learner), learner, int(meta["epoch"])
