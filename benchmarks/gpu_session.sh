@@ -123,7 +123,8 @@ learners() {
       -print | tar -cf - -T -) | tar -xf - -C "$OUT"
     pairs="$pairs $learner=$OUT/learners-$learner"
   done
-  python3 -m mjx_hands.experiments compare $pairs --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
+  python3 -m mjx_hands.experiments compare $pairs --variant "${LEARNER_VARIANT:-no_imitation}" \
+    --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
 }
 
 for stage in $STAGES; do
