@@ -888,6 +888,10 @@ def test_td3_names_the_projects_learner_with_its_options_and_ddpg_stays_the_pape
         assert td3 == dataclasses.replace(
             paper, algo="td3", ddpg=dataclasses.replace(paper.ddpg, **td3_options)
         )
+        normed = train_config.preset(kind, algo="ddpg-ln")
+        assert normed == dataclasses.replace(
+            paper, algo="ddpg-ln", ddpg=dataclasses.replace(paper.ddpg, layer_norm=True)
+        )
     argv = ["--preset", "cpu", "--algo", "td3", "--ddpg.n-step", "5"]
     parsed = tyro.cli(train_config.TrainConfig, default=train_cli.default_config(argv), args=argv)
     assert parsed.ddpg.n_step == 5 and parsed.ddpg.twin_critics  # a flag overrides one option
