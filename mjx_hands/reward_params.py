@@ -183,10 +183,14 @@ def task_weights(task: str, knobs: RewardKnobs | None = None) -> RewardWeights:
     return RewardWeights(**(dict(tasks.spec(task).reward_knobs) | given))
 
 
+def knobs_of(weights: RewardWeights) -> RewardKnobs:
+    """The six knobs of ``weights``, as numbers."""
+    return RewardKnobs(**{name: float(getattr(weights, name)) for name in KNOB_NAMES})
+
+
 def task_knobs(task: str, knobs: RewardKnobs | None = None) -> RewardKnobs:
     """Every knob of ``task`` as a number (see :func:`task_weights`)."""
-    weights = task_weights(task, knobs)
-    return RewardKnobs(**{name: float(getattr(weights, name)) for name in KNOB_NAMES})
+    return knobs_of(task_weights(task, knobs))
 
 
 def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:

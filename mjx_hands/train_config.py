@@ -40,7 +40,8 @@ and LayerNorm (clap 0.91 +- 0.04). Evidence: benchmarks/RESULTS.md, "Learners".
 
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
-    """Train a hand-interaction policy with DDPG or TD3 (or Brax's SAC/PPO for comparison)."""
+    """Train a hand-interaction policy with the project's DDPG learner (``--algo``: the
+    paper's, with LayerNorm, or with TD3's additions) or Brax's SAC/PPO for comparison."""
 
     task: Task = "handshake"
     """Interaction to learn."""
@@ -242,9 +243,8 @@ def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
     they were recorded trained with ``RewardWeights``' defaults; runs started on
     2026-12-02 may name a set ("authors" or "project")."""
     if value is None or value == "project":
-        defaults = reward_params.RewardWeights()
-        value = {name: getattr(defaults, name) for name in reward_params.KNOB_NAMES}
-    elif value == "authors":
+        return reward_params.knobs_of(reward_params.RewardWeights())
+    if value == "authors":
         value = dict(tasks.spec(task).authors_knobs)
     return reward_params.task_knobs(task, reward_params.RewardKnobs(**value))
 
