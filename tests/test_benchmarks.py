@@ -92,3 +92,32 @@ def test_cost_driver_variants_change_a_copy_of_the_model_only():
     assert env.mj_model.numeric("max_geom_pairs").data[0] == cfg.max_geom_pairs
     with pytest.raises(SystemExit, match="unknown variants"):
         cost_drivers.main(["--variants", "as built,fewer fingers"])
+
+
+@pytest.mark.slow
+def test_time_to_target_stops_the_run_at_the_first_evaluation_that_reaches_it(tmp_path):
+    """benchmarks/time_to_target.py times a real train.py launch and stops it once an
+    evaluation reaches the target (0 here: the first), long before its epoch budget."""
+    from benchmarks import first_epoch, time_to_target
+
+    out = tmp_path / "time.json"
+    tiny = [*first_epoch.SMALL, "--epochs", "200", "--checkpoint-every", "1"]
+    time_to_target.main(
+        [
+            "--tasks",
+            "handclap",
+            "--algos",
+            "ddpg-ln",
+            "--target",
+            "0",
+            "--out",
+            str(out),
+            "--",
+            *tiny,
+        ]
+    )
+    (row,) = json.loads(out.read_text())["results"]
+    assert row["reached"] and row["epoch_at_target"] == 1
+    assert 0 < row["minutes_to_target"] <= row["process_minutes"]
+    assert row["curve"][0]["env_steps"] > 0
+    assert row["curve"][-1]["epoch"] < 200  # stopped, not trained to the end
