@@ -7,6 +7,7 @@
 #   STAGES=train BUDGET_S=480 bash benchmarks/gpu_session.sh   # training only
 #   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
 #   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG, LayerNorm, td3: 5 seeds each
+#   STAGES=target BUDGET_S=560 bash benchmarks/gpu_session.sh    # handshake: minutes to 90 % from launch
 #   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
@@ -127,10 +128,21 @@ learners() {
     --out "$OUT/learners" 2>&1 | tee "$OUT/learners.log"
 }
 
+target() {
+  # The GPU target: the handshake to 90 % success at the end, minutes from launch
+  # (compiles included), ddpg-ln then the paper's DDPG, each given half of what is left.
+  left=$((BUDGET_S - SECONDS))
+  minutes=$(python3 -c "print(max(0.5, ($left / 2 - 60) / 60))")
+  echo "== time to 90 %: ${left} s left, at most ${minutes} min per learner" | tee -a "$OUT/session.log"
+  timeout -s INT "$((left - 10))" python3 -m benchmarks.time_to_target --tasks ${TIME_TASKS:-handshake} \
+    --algos ddpg-ln ddpg --minutes "$minutes" --mocap-source synthetic \
+    --out "$OUT/results_time_to_target_gpu.json" 2>&1 | tee "$OUT/time.log"
+}
+
 for stage in $STAGES; do
   case $stage in
-    throughput|train|grid|learners) "$stage" ;;
-    *) echo "unknown stage $stage; expected throughput, train, grid or learners" >&2; exit 2 ;;
+    throughput|train|grid|learners|target) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput, train, grid, learners or target" >&2; exit 2 ;;
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"

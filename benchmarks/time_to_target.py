@@ -3,7 +3,8 @@ run per task and learner, each in a fresh process, the learners side by side.
 
     python -m benchmarks.time_to_target --out benchmarks/results_time_to_target_cpu.json
 
-Each launch trains one seed with the device's preset on the authors' recordings, the
+Each launch trains one seed with the device's preset on the authors' recordings (or
+``--mocap-source synthetic``, where ../shared is absent, e.g. on a lent GPU), the
 reward each task's five-seed grids used (handshake and E.T.: the authors' reward,
 without imitation; the clap: with imitation). The benchmark reads the run's
 ``metrics.csv`` while it trains; the first evaluation whose success at the end reaches
@@ -59,7 +60,7 @@ def launch(run_dir: Path, task: str, algo: str, seed: int, args) -> dict:
     """One train.py process, stopped at the first evaluation at or above the target."""
     command = [
         sys.executable, str(ROOT / "train.py"), "--task", task, "--algo", algo,
-        "--seed", str(seed), "--mocap-source", "optitrack", "--run-dir", str(run_dir),
+        "--seed", str(seed), "--mocap-source", args.mocap_source, "--run-dir", str(run_dir),
         "--max-minutes", str(args.minutes), *TASK_OPTIONS[task], *args.extra,
     ]  # fmt: skip
     log = run_dir.with_suffix(".log")
@@ -108,6 +109,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--algos", nargs="+", default=["ddpg-ln", "ddpg"])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--target", type=float, default=0.9)
+    parser.add_argument(
+        "--mocap-source", default="optitrack", choices=["optitrack", "synthetic"],
+        help="the authors' recordings (../shared) or the project's synthetic demonstrations",
+    )  # fmt: skip
     parser.add_argument("--minutes", type=float, default=15.0, help="give up after this long")
     parser.add_argument(
         "--out", type=Path, default=Path("benchmarks/results_time_to_target_cpu.json")
@@ -121,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         "jax": jax.__version__,
         "backend": jax.default_backend(),
         "target": args.target,
+        "mocap_source": args.mocap_source,
         "minutes_cap": args.minutes,
         "train_options": args.extra,
         "results": [],
