@@ -21,6 +21,7 @@ import csv
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -54,6 +55,22 @@ def evaluations(metrics: Path) -> list[dict]:
         for r in rows
         if r.get(HEADLINE)
     ]
+
+
+def median_of(rows: list[dict], key: str) -> float | None:
+    values = [float(r[key]) for r in rows if r.get(key)]
+    return statistics.median(values) if values else None
+
+
+def rates(metrics: Path) -> dict:
+    """Median env steps and critic updates per second of the run's epochs after the first
+    (which includes the compiles)."""
+    with open(metrics) as f:
+        rows = list(csv.DictReader(f))[1:]
+    return {
+        "env_steps_per_second": median_of(rows, "time/env_steps_per_second"),
+        "updates_per_second": median_of(rows, "time/updates_per_second"),
+    }
 
 
 def launch(run_dir: Path, task: str, algo: str, seed: int, args) -> dict:
@@ -97,6 +114,7 @@ def launch(run_dir: Path, task: str, algo: str, seed: int, args) -> dict:
         "epoch_at_target": reached["epoch"] if reached else None,
         "best_success": best["success"] if best else None,
         "process_minutes": wall / 60,
+        **rates(run_dir / "metrics.csv"),
         "curve": curve,
     }
 

@@ -288,7 +288,9 @@ def run_population(
             if len(diverged) == len(runs):
                 raise TrainingDiverged(f"epoch {epoch}: every member of the population diverged")
             rows = _epoch_rows(config, len(runs), epoch, seconds, time.perf_counter() - launched)
-            rows = [row | m for row, m in zip(rows, metrics)]
+            rows = [
+                _with_update_rate(row | m, r.log.rows) for row, m, r in zip(rows, metrics, runs)
+            ]
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
             out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
@@ -385,6 +387,16 @@ def _epoch_rows(
     if members > 1:  # what the machine did: every member's steps
         row["time/population_env_steps_per_second"] = members * steps / seconds
     return [row | memory_use()] * members
+
+
+def _with_update_rate(row: dict[str, float], logged: list[dict[str, float]]) -> dict[str, float]:
+    """``row`` with the epoch's critic updates per second, counted by the learner itself
+    (none during the replay warm-up), when the run's previous row is the epoch before."""
+    previous = logged[-1] if logged else {"epoch": 0.0, "train/updates": 0.0}
+    if "train/updates" not in row or previous.get("epoch") != row["epoch"] - 1:
+        return row
+    done = float(row["train/updates"]) - previous["train/updates"]
+    return row | {"time/updates_per_second": done / row["time/epoch_seconds"]}
 
 
 def _checkpoint_due(config: TrainConfig, epoch: int, since_save: float) -> bool:

@@ -177,6 +177,9 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     tree, _ = checkpoint.restore(run_dir / "best", like)
     assert set(tree) == {"learner"}  # no env state, no replay buffer
     assert int(tree["learner"].updates) == best_row["train/updates"]
+    for before, row in zip([{"train/updates": 0.0}, *rows], rows):  # the learner's own count
+        done = row["train/updates"] - before["train/updates"]
+        assert row["time/updates_per_second"] * row["time/epoch_seconds"] == pytest.approx(done)
 
 
 def test_existing_run_is_not_overwritten_without_resume(tmp_path):
