@@ -11,17 +11,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import shutil
 import tempfile
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
+from benchmarks import machine
 from mjx_hands import checkpoint
 
 
@@ -94,12 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     shutil.rmtree(scratch)
     out = {
-        "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores, "
-        f"{jax.default_backend()}",
-        "versions": {
-            "orbax": ocp.__version__ if hasattr(ocp, "__version__") else "?",
-            "jax": jax.__version__,
-        },
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "run_dir": str(args.run_dir),
         "step": step,
         "state_mib": sum(a.nbytes for a in arrays.values()) / 2**20,

@@ -17,7 +17,6 @@ import argparse
 import copy
 import json
 import os
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -27,7 +26,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from benchmarks import throughput
+from benchmarks import machine, throughput
 from mjx_hands import env as env_lib
 
 
@@ -213,8 +212,8 @@ def main(argv: list[str] | None = None) -> dict:
         rng.uniform(-1, 1, (args.control_steps, batch, env.action_size)), np.float32
     )
     report = {
-        "machine": {"platform": platform.platform(), "device": str(jax.devices()[0])},
-        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "model": env_lib.model_sizes(env),
         "batch": batch,
         "control_steps": args.control_steps,

@@ -17,12 +17,13 @@ import argparse
 import csv
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from benchmarks import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = [
@@ -79,12 +80,9 @@ def main(argv: list[str] | None = None) -> int:
                 row |= launch(run_dir, physics, args.task, folder, args.extra)
                 print(json.dumps(row), flush=True)
                 results.append(row)
-    import jax
-
     record = {
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-        "jax": jax.__version__,
-        "backend": jax.default_backend(),
+        "machine": machine.describe_in_child(),
+        "versions": machine.versions(),
         "task": args.task,
         "train_options": SMALL + args.extra,
         "results": results,

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 
 import jax
 import jax.numpy as jnp
 
+from benchmarks import machine
 from mjx_hands.agents.ddpg import replay
 
 OBS, ACT = 145, 24
@@ -99,12 +99,8 @@ def main() -> None:
             flush=True,
         )
     result = {
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor(),
-            "device": str(jax.devices()[0]),
-            "jax": jax.__version__,
-        },
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "rows": rows,
     }
     if args.out:

@@ -15,15 +15,14 @@ import csv
 import dataclasses
 import io
 import json
-import platform
 import shutil
 import tempfile
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
+from benchmarks import machine
 from mjx_hands import train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
@@ -101,9 +100,8 @@ def main(argv: list[str] | None = None) -> int:
     with open(run_dir / "metrics.csv", newline="") as f:
         rows = [{k: float(v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)]
     result = {
-        "machine": f"{platform.processor() or platform.machine()}, {jax.device_count()} "
-        f"{jax.default_backend()} device(s), {len(__import__('os').sched_getaffinity(0))} cores",
-        "versions": {"jax": jax.__version__, "python": platform.python_version()},
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "config": train_config.config_to_json(dataclasses.replace(config, run_dir=None)),
         "wall_seconds": time.perf_counter() - started,
         "stop_reason": summary["stop_reason"],

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -25,9 +24,9 @@ import time
 from pathlib import Path
 
 import jax
-import mujoco
 from mujoco.mjx._src import collision_driver, constraint, forward, smooth, solver
 
+from benchmarks import machine
 from mjx_hands import env as env_lib
 from mjx_hands import xla_flags
 
@@ -100,12 +99,8 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     env = env_lib.make_env("handshake", mocap_source="synthetic", physics="mjx")
     report = {
-        "machine": {
-            "platform": platform.platform(),
-            "cpu_count": os.cpu_count(),
-            "device": str(jax.devices()[0]),
-        },
-        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "model": env_lib.model_sizes(env),
         "batch": args.batch,
         "runs": [measure(env, args.batch, args.repeats)],

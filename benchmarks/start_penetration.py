@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 from pathlib import Path
 
 import jax
 import mujoco
 import numpy as np
 
+from benchmarks import machine
 from mjx_hands import env as env_lib
 from mjx_hands import mocap
 
@@ -79,8 +79,8 @@ def main(argv: list[str] | None = None) -> dict:
     else:
         print(f"no recordings at {args.mocap_path}: synthetic demonstrations only")
     report = {
-        "machine": {"platform": platform.platform(), "device": str(jax.devices()[0])},
-        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "start_max_penetration_m": env_lib.EnvConfig().start_max_penetration,
         "start_backoff_steps": env_lib.EnvConfig().start_backoff_steps,
         "start_backoff_distance_m": env_lib.EnvConfig().start_backoff_distance,

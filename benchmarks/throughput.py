@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import time
 
@@ -27,6 +26,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx, rollout
 
+from benchmarks import machine
 from mjx_hands import env as env_lib
 from mjx_hands import physics
 
@@ -238,14 +238,8 @@ def main(argv: list[str] | None = None) -> dict:
     )
     nthread = min(2, os.cpu_count() or 1) if args.quick else os.cpu_count() or 1
     report = {
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor() or platform.machine(),
-            "cpu_count": os.cpu_count(),
-            "jax_device": str(jax.devices()[0]),
-            "device_kind": jax.devices()[0].device_kind,
-        },
-        "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+        "machine": machine.describe(),
+        "versions": machine.versions(),
         "model": env_lib.model_sizes(env),
         "control_steps": args.control_steps,
         "results": [],

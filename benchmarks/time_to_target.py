@@ -19,14 +19,14 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from benchmarks import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 HEADLINE = "eval/success_final"
@@ -137,12 +137,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("extra", nargs="*", help="more train.py options (after --)")
     args = parser.parse_args(argv)
-    import jax
-
     record = {
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-        "jax": jax.__version__,
-        "backend": jax.default_backend(),
+        "machine": machine.describe_in_child(),
+        "versions": machine.versions(),
         "target": args.target,
         "mocap_source": args.mocap_source,
         "minutes_cap": args.minutes,

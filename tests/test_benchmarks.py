@@ -116,8 +116,24 @@ def test_time_to_target_stops_the_run_at_the_first_evaluation_that_reaches_it(tm
             *tiny,
         ]
     )
-    (row,) = json.loads(out.read_text())["results"]
+    record = json.loads(out.read_text())
+    assert record["machine"]["backend"] == jax.default_backend()
+    (row,) = record["results"]
     assert row["reached"] and row["epoch_at_target"] == 1
     assert 0 < row["minutes_to_target"] <= row["process_minutes"]
     assert row["curve"][0]["env_steps"] > 0
     assert row["curve"][-1]["epoch"] < 200  # stopped, not trained to the end
+
+
+def test_every_benchmark_describes_the_machine_in_one_shape():
+    """The child process (what launchers use, so they never hold the device) reports
+    what this process does, and the throughput plot labels a record of that shape."""
+    from benchmarks import machine, plot_throughput
+
+    here = machine.describe()
+    assert machine.describe_in_child() == here
+    assert here["backend"] == jax.default_backend() and here["usable_cores"] >= 1
+    assert machine.versions()["jax"] == jax.__version__
+    assert machine.versions()["mujoco"] == mujoco.__version__
+    label = plot_throughput.machine_label({"machine": here})
+    assert label == f"CPU, {here['cpu_count']} cores"

@@ -1,0 +1,74 @@
+"""The machine and library versions a benchmark's JSON records, in one shape for all.
+
+    python -m benchmarks.machine     # prints the record as JSON
+
+Benchmarks that time ``train.py`` in child processes call :func:`describe_in_child`: on a
+GPU, initialising JAX in the parent would take the accelerator's memory from the run
+being timed (JAX preallocates most of it per process).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+from importlib import metadata
+
+
+def versions() -> dict:
+    """Python's and the numeric stack's versions (None where a package is absent)."""
+
+    def version_of(package: str) -> str | None:
+        try:
+            return metadata.version(package)
+        except metadata.PackageNotFoundError:
+            return None
+
+    packages = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "flax", "optax", "orbax-checkpoint")
+    return {"python": platform.python_version()} | {p: version_of(p) for p in packages}
+
+
+def cpu_model() -> str:
+    """The CPU's marketing name where Linux reports it (platform.processor() often gives
+    only the architecture), else the architecture."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def describe() -> dict:
+    """This process's machine: CPU, the cores it may use, and JAX's default device."""
+    import jax
+
+    device = jax.devices()[0]
+    return {
+        "platform": platform.platform(),
+        "processor": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "usable_cores": len(os.sched_getaffinity(0)),
+        "backend": jax.default_backend(),
+        "device": str(device),
+        "device_kind": device.device_kind,
+        "device_count": jax.device_count(),
+    }
+
+
+def describe_in_child() -> dict:
+    """:func:`describe`, run in a fresh Python so this process never holds the device."""
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks.machine"],
+        capture_output=True, text=True, check=True,
+        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+    )  # fmt: skip
+    return json.loads(done.stdout)["machine"]
+
+
+if __name__ == "__main__":
+    print(json.dumps({"machine": describe(), "versions": versions()}))
