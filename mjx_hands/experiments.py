@@ -5,6 +5,7 @@ and the paper's Fig. 4 comparison reported from them.
         --variants full baseline1 baseline2 no_imitation
     python -m mjx_hands.experiments run --run-dir runs/fig4-et --resume
     python -m mjx_hands.experiments report runs/fig4-* --out benchmarks/fig4
+    python -m mjx_hands.experiments archive runs/fig4-et benchmarks/fig4/et --log fig4-et.log
 
 (installed: ``mjx-hands-experiments``). ``run`` trains every member together in one
 compiled epoch (:func:`mjx_hands.training.run_population`); members differ only in
@@ -783,16 +784,91 @@ def compare_main(argv: list[str]) -> int:
     return 0
 
 
-USAGE = """usage: python -m mjx_hands.experiments {run,report,compare} [--help] ...
+# --------------------------------------------------------------------- archive
+ARCHIVED_FILES = ("metrics.csv", "config.json")
+"""What a member keeps in an archive: its curves and its configuration, not its
+checkpoints, replay buffer or TensorBoard events."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ArchiveArgs:
+    """Keep a grid's evidence without its checkpoints: grid.json and each member's
+    metrics.csv and config.json, in a folder small enough to commit. The report and
+    compare commands read the archive as they read the grid."""
+
+    grid: Annotated[tyro.conf.Positional[str], tyro.conf.arg(metavar="GRID_DIR")]
+    """The trained grid's folder (holding grid.json)."""
+    dest: Annotated[tyro.conf.Positional[str], tyro.conf.arg(metavar="DEST")]
+    """A new folder for the archive (refused if it holds a grid)."""
+    log: Annotated[str | None, tyro.conf.arg(metavar="FILE")] = None
+    """The grid's console output, kept as grid.log (optional)."""
+
+
+def archive_grid(grid_dir: Path, dest: Path, log: Path | None = None) -> list[Path]:
+    """Copy ``grid_dir``'s record into ``dest``; returns the files written. Each member's
+    config.json names its run folder inside ``dest`` (the original folder, with its
+    checkpoints, is not part of the archive)."""
+    grid_dir, dest = Path(grid_dir), Path(dest)
+    record_path = grid_dir / GRID_FILE
+    if not record_path.is_file():
+        raise FileNotFoundError(f"{grid_dir} is not an experiment grid ({GRID_FILE} missing)")
+    if (dest / GRID_FILE).exists():
+        raise FileExistsError(f"{dest} already holds a grid; choose a new folder")
+    if log is not None and not Path(log).is_file():
+        raise FileNotFoundError(f"--log {log}: no such file")
+    record = json.loads(record_path.read_text())
+    missing = [
+        f"{m['run_dir']}/{name}"
+        for m in record["members"]
+        for name in ARCHIVED_FILES
+        if not (grid_dir / m["run_dir"] / name).is_file()
+    ]
+    if missing:
+        raise FileNotFoundError(f"{grid_dir}: members not trained yet ({', '.join(missing)})")
+    written = []
+    for m in record["members"]:
+        source, target = grid_dir / m["run_dir"], dest / m["run_dir"]
+        target.mkdir(parents=True, exist_ok=True)
+        (target / "metrics.csv").write_bytes((source / "metrics.csv").read_bytes())
+        config = json.loads((source / "config.json").read_text())
+        config["run_dir"] = str(target)
+        (target / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+        written += [target / name for name in ARCHIVED_FILES]
+    if "train" in record:
+        record["train"]["run_dir"] = str(dest)
+    (dest / GRID_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    written.append(dest / GRID_FILE)
+    if log is not None:
+        (dest / "grid.log").write_bytes(Path(log).read_bytes())
+        written.append(dest / "grid.log")
+    return written
+
+
+def archive_main(argv: list[str]) -> int:
+    args = tyro.cli(ArchiveArgs, args=argv)
+    try:
+        written = archive_grid(Path(args.grid), Path(args.dest), args.log and Path(args.log))
+    except (FileNotFoundError, FileExistsError, KeyError, json.JSONDecodeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    size = sum(f.stat().st_size for f in written) / 2**20
+    print(f"archived {args.grid} into {args.dest}: {len(written)} files, {size:.1f} MiB")
+    return 0
+
+
+USAGE = """usage: python -m mjx_hands.experiments {run,report,compare,archive} [--help] ...
 
   run      train seeds x reward variants of one task as one population
   report   Fig.-4-style plot, summary table and the paper's statements from grids
-  compare  learners side by side: grids of one task trained with different options"""
+  compare  learners side by side: grids of one task trained with different options
+  archive  a grid's curves and configs without its checkpoints (small enough to commit)"""
 
 
 def main(argv: list[str] | None = None) -> int:
     return cli.dispatch(
-        argv, {"run": run_main, "report": report_main, "compare": compare_main}, USAGE
+        argv,
+        {"run": run_main, "report": report_main, "compare": compare_main, "archive": archive_main},
+        USAGE,
     )
 
 

@@ -286,6 +286,52 @@ def test_compare_learners_from_grids(tmp_path, capsys):
     assert "expected LABEL=GRID_DIR" in capsys.readouterr().err
 
 
+def test_archive_keeps_what_compare_reads_and_leaves_checkpoints_out(tmp_path, capsys):
+    grid = _fixture_grid(tmp_path / "runs", "handclap", {"full": [0.9, 0.6]}, {"full": [0] * 2})
+    for seed in (0, 1):
+        run = grid / "full" / f"seed{seed}"
+        (run / "config.json").write_text(json.dumps({"seed": seed, "run_dir": str(run)}))
+        (run / "checkpoints" / "10").mkdir(parents=True)
+        (run / "checkpoints" / "10" / "state").write_bytes(b"x" * 1000)
+    log = tmp_path / "grid.log"
+    log.write_text("epoch 10/10\n")
+    dest = tmp_path / "kept"
+    assert experiments.main(["archive", str(grid), str(dest), "--log", str(log)]) == 0
+    kept = sorted(str(f.relative_to(dest)) for f in dest.rglob("*") if f.is_file())
+    assert kept == ["full/seed0/config.json", "full/seed0/metrics.csv", "full/seed1/config.json",
+                    "full/seed1/metrics.csv", "grid.json", "grid.log"]  # fmt: skip
+    config = json.loads((dest / "full" / "seed1" / "config.json").read_text())
+    assert config == {"seed": 1, "run_dir": str(dest / "full" / "seed1")}
+    original = experiments.compare_learners([("a", grid)], "full")
+    archived = experiments.compare_learners([("a", dest)], "full")
+    assert [{k: v for k, v in r.items() if k != "grids"} for r in archived] == [
+        {k: v for k, v in r.items() if k != "grids"} for r in original
+    ]
+    # Refusals name what is wrong; nothing is overwritten.
+    assert experiments.main(["archive", str(grid), str(dest)]) == 2
+    assert "already holds a grid" in capsys.readouterr().err
+    assert experiments.main(["archive", str(tmp_path), str(tmp_path / "x")]) == 2
+    assert "not an experiment grid" in capsys.readouterr().err
+    (grid / "full" / "seed1" / "config.json").unlink()
+    assert experiments.main(["archive", str(grid), str(tmp_path / "y")]) == 2
+    assert "full/seed1/config.json" in capsys.readouterr().err
+    assert not (tmp_path / "y").exists()
+
+
+def test_committed_learner_grids_are_archives_compare_reads(tmp_path):
+    """The grid records under benchmarks/learners are what archive writes: archiving one
+    again changes no figure of its comparison."""
+    committed = Path(experiments.__file__).parents[1] / "benchmarks" / "learners" / "et" / "layernorm"
+    again = tmp_path / "again"
+    experiments.archive_grid(committed, again)
+    rows = experiments.compare_learners([("layernorm", committed)], "no_imitation")
+    rows_again = experiments.compare_learners([("layernorm", again)], "no_imitation")
+    assert rows[0]["n_seeds"] == 5
+    assert {k: v for k, v in rows[0].items() if k != "grids"} == {
+        k: v for k, v in rows_again[0].items() if k != "grids"
+    }
+
+
 def test_grid_members_differ_only_in_seed_and_variant():
     grid = experiments.GridConfig(variants=("full", "no_imitation"), seeds=2,
                      train=dataclasses.replace(train_config.preset("cpu"), run_dir="g", seed=3))
