@@ -185,26 +185,16 @@ progress line shows each variant's mean evaluation success at the end of the epi
 
 
 def run_main(argv: list[str]) -> int:
-    from mjx_hands import checkpoint
-    from mjx_hands.mocap import MocapError
-
-    try:
+    def start() -> tuple[list[dict[str, Any]], GridConfig]:
         default = _grid_default(argv)
         grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
         compile_cache.enable()
-        summaries = run_grid(grid)
-    except training.TrainingDiverged as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 3
-    except (
-        ValueError,
-        MocapError,
-        checkpoint.CheckpointError,
-        FileNotFoundError,
-        FileExistsError,
-    ) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return run_grid(grid), grid
+
+    result, code = train_cli.reported(start)
+    if code:
+        return code
+    summaries, grid = result
     by_variant: dict[str, list[float]] = {}
     for s in summaries:
         by_variant.setdefault(s["variant"], []).append(s["final_eval"].get(HEADLINE, math.nan))

@@ -4,6 +4,8 @@ installed (both call :func:`main`)."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
+from typing import Any
 
 USAGE = """Train a hand-interaction policy: the project's single command.
 
@@ -56,35 +58,51 @@ def preset_default(argv: list[str]):
     )
 
 
-def main(argv: list[str] | None = None) -> int:
-    import tyro
-
-    from mjx_hands import checkpoint, compile_cache, train_config, training
+def reported(start: Callable[[], Any]) -> tuple[Any, int]:
+    """``(start(), 0)``, or, when training cannot go on, ``(None, exit code)`` after
+    printing ``error: ...``: 3 when every run diverged, 2 for a refusal (bad options or
+    data, a damaged checkpoint, a missing or occupied folder). Every training command
+    (train.py, experiments run) reports its errors through this."""
+    from mjx_hands import checkpoint, training
     from mjx_hands.mocap import MocapError
 
-    argv = sys.argv[1:] if argv is None else argv
-    try:
-        default = default_config(argv)
-        config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
-        compile_cache.enable()
-        if config.algo in train_config.LEARNER_OPTIONS:
-            summary = training.run(config)
-        else:
-            from mjx_hands import brax_agents
-
-            summary = brax_agents.run(config)
-    except training.TrainingDiverged as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 3
-    except (
+    refusals = (
         ValueError,
         MocapError,
         checkpoint.CheckpointError,
         FileNotFoundError,
         FileExistsError,
-    ) as err:
+    )
+    try:
+        return start(), 0
+    except training.TrainingDiverged as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return None, 3
+    except refusals as err:
+        print(f"error: {err}", file=sys.stderr)
+        return None, 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    import tyro
+
+    from mjx_hands import compile_cache, train_config, training
+
+    argv = sys.argv[1:] if argv is None else argv
+
+    def start() -> dict:
+        default = default_config(argv)
+        config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
+        compile_cache.enable()
+        if config.algo in train_config.LEARNER_OPTIONS:
+            return training.run(config)
+        from mjx_hands import brax_agents
+
+        return brax_agents.run(config)
+
+    summary, code = reported(start)
+    if code:
+        return code
     final = summary["final_eval"]
     print(
         f"done ({summary['stop_reason']}): {summary['epochs']} epochs, "
