@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results_first_epoch_cpu.json"))
     parser.add_argument("extra", nargs="*", help="more train.py options (after --)")
     args = parser.parse_args(argv)
+    described = machine.describe_in_child()
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         for physics in args.physics:
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(json.dumps(row), flush=True)
                 results.append(row)
     record = {
-        "machine": machine.describe_in_child(),
+        "machine": described,
         "versions": machine.versions(),
         "task": args.task,
         "train_options": SMALL + args.extra,

@@ -36,11 +36,7 @@ export XLA_FLAGS="${XLA_FLAGS:-} --xla_gpu_triton_gemm_any=true"
 {
   date -u
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>/dev/null
-  python3 -c 'import sys, jax, mujoco, flax, optax, orbax.checkpoint as o
-print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__,
-      "flax", flax.__version__, "optax", optax.__version__, "orbax", o.__version__)
-import os, mjx_hands  # mjx_hands adds its CPU code-generation flag where jaxlib knows it
-print(jax.devices(), "XLA_FLAGS:", os.environ.get("XLA_FLAGS"))'
+  python3 -m benchmarks.machine  # devices, XLA flags as training sees them, versions
 } 2>&1 | tee "$OUT/session.log"
 
 throughput() {

@@ -26,7 +26,10 @@ def versions() -> dict:
         except metadata.PackageNotFoundError:
             return None
 
-    packages = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "flax", "optax", "orbax-checkpoint")
+    packages = (
+        "jax", "jaxlib", "jax-cuda12-plugin", "jax-cuda13-plugin", "mujoco", "mujoco-mjx",
+        "numpy", "flax", "optax", "orbax-checkpoint", "brax",
+    )  # fmt: skip
     return {"python": platform.python_version()} | {p: version_of(p) for p in packages}
 
 
@@ -44,8 +47,11 @@ def cpu_model() -> str:
 
 
 def describe() -> dict:
-    """This process's machine: CPU, the cores it may use, and JAX's default device."""
+    """This process's machine: CPU, the cores it may use, JAX's default device, and the
+    XLA flags as a training process sees them (importing mjx_hands adds its CPU flag)."""
     import jax
+
+    import mjx_hands  # noqa: F401  (its XLA flags, before jax.devices() starts XLA)
 
     device = jax.devices()[0]
     return {
@@ -57,17 +63,21 @@ def describe() -> dict:
         "device": str(device),
         "device_kind": device.device_kind,
         "device_count": jax.device_count(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }
 
 
 def describe_in_child() -> dict:
-    """:func:`describe`, run in a fresh Python so this process never holds the device."""
+    """:func:`describe`, run in a fresh Python so this process never holds the device.
+    Launchers call it before their first launch, so a failure costs no measurement."""
     done = subprocess.run(
         [sys.executable, "-m", "benchmarks.machine"],
-        capture_output=True, text=True, check=True,
+        capture_output=True, text=True, check=False,
         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
     )  # fmt: skip
-    return json.loads(done.stdout)["machine"]
+    if done.returncode != 0:
+        raise RuntimeError(f"describing the machine failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.splitlines()[-1])["machine"]
 
 
 if __name__ == "__main__":

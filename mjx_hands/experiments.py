@@ -789,24 +789,28 @@ class ArchiveArgs:
     grid: Annotated[tyro.conf.Positional[str], tyro.conf.arg(metavar="GRID_DIR")]
     """The trained grid's folder (holding grid.json)."""
     dest: Annotated[tyro.conf.Positional[str], tyro.conf.arg(metavar="DEST")]
-    """A new folder for the archive (refused if it holds a grid)."""
+    """A new (or empty) folder for the archive."""
     log: Annotated[str | None, tyro.conf.arg(metavar="FILE")] = None
     """The grid's console output, kept as grid.log (optional)."""
 
 
 def archive_grid(grid_dir: Path, dest: Path, log: Path | None = None) -> list[Path]:
-    """Copy ``grid_dir``'s record into ``dest``; returns the files written. Each member's
-    config.json names its run folder inside ``dest`` (the original folder, with its
-    checkpoints, is not part of the archive)."""
+    """Copy ``grid_dir``'s record into the new folder ``dest``; returns the files written.
+    Each member's config.json names its run folder inside ``dest`` (the original folder,
+    with its checkpoints, is not part of the archive); grid.json keeps ``archived_from``.
+    Everything is read and checked before the first file is written."""
     grid_dir, dest = Path(grid_dir), Path(dest)
     record_path = grid_dir / GRID_FILE
     if not record_path.is_file():
         raise FileNotFoundError(f"{grid_dir} is not an experiment grid ({GRID_FILE} missing)")
-    if (dest / GRID_FILE).exists():
-        raise FileExistsError(f"{dest} already holds a grid; choose a new folder")
+    if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+        raise FileExistsError(f"{dest} exists and is not an empty folder; choose a new one")
     if log is not None and not Path(log).is_file():
         raise FileNotFoundError(f"--log {log}: no such file")
     record = json.loads(record_path.read_text())
+    outside = [m["run_dir"] for m in record["members"] if not _inside(m["run_dir"])]
+    if outside:
+        raise ValueError(f"{record_path}: member folders outside the grid: {', '.join(outside)}")
     missing = [
         f"{m['run_dir']}/{name}"
         for m in record["members"]
@@ -815,17 +819,25 @@ def archive_grid(grid_dir: Path, dest: Path, log: Path | None = None) -> list[Pa
     ]
     if missing:
         raise FileNotFoundError(f"{grid_dir}: members not trained yet ({', '.join(missing)})")
+    kept = {  # member folder -> (metrics.csv bytes, config)
+        m["run_dir"]: (
+            (grid_dir / m["run_dir"] / "metrics.csv").read_bytes(),
+            json.loads((grid_dir / m["run_dir"] / "config.json").read_text()),
+        )
+        for m in record["members"]
+    }
     written = []
-    for m in record["members"]:
-        source, target = grid_dir / m["run_dir"], dest / m["run_dir"]
+    for run_dir, (metrics, config) in kept.items():
+        target = dest / run_dir
         target.mkdir(parents=True, exist_ok=True)
-        (target / "metrics.csv").write_bytes((source / "metrics.csv").read_bytes())
-        config = json.loads((source / "config.json").read_text())
-        config["run_dir"] = str(target)
-        (target / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+        (target / "metrics.csv").write_bytes(metrics)
+        (target / "config.json").write_text(
+            json.dumps(config | {"run_dir": str(target)}, indent=2) + "\n"
+        )
         written += [target / name for name in ARCHIVED_FILES]
     if "train" in record:
         record["train"]["run_dir"] = str(dest)
+    record["archived_from"] = str(grid_dir)
     (dest / GRID_FILE).write_text(json.dumps(record, indent=2) + "\n")
     written.append(dest / GRID_FILE)
     if log is not None:
@@ -834,11 +846,17 @@ def archive_grid(grid_dir: Path, dest: Path, log: Path | None = None) -> list[Pa
     return written
 
 
+def _inside(run_dir: str) -> bool:
+    """Whether a member's folder, as grid.json names it, lies inside its grid."""
+    path = Path(run_dir)
+    return not path.is_absolute() and ".." not in path.parts
+
+
 def archive_main(argv: list[str]) -> int:
     args = tyro.cli(ArchiveArgs, args=argv)
     try:
         written = archive_grid(Path(args.grid), Path(args.dest), args.log and Path(args.log))
-    except (FileNotFoundError, FileExistsError, KeyError, json.JSONDecodeError) as err:
+    except (OSError, ValueError, KeyError) as err:  # JSONDecodeError is a ValueError
         print(f"error: {err}", file=sys.stderr)
         return 2
     size = sum(f.stat().st_size for f in written) / 2**20

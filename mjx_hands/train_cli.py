@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TypeVar
+
+T = TypeVar("T")
 
 USAGE = """Train a hand-interaction policy: the project's single command.
 
@@ -58,7 +60,7 @@ def preset_default(argv: list[str]):
     )
 
 
-def reported(start: Callable[[], Any]) -> tuple[Any, int]:
+def reported(start: Callable[[], T]) -> tuple[T | None, int]:
     """``(start(), 0)``, or, when training cannot go on, ``(None, exit code)`` after
     printing ``error: ...``: 3 when every run diverged, 2 for a refusal (bad options or
     data, a damaged checkpoint, a missing or occupied folder). Every training command

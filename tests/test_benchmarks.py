@@ -125,7 +125,7 @@ def test_time_to_target_stops_the_run_at_the_first_evaluation_that_reaches_it(tm
     assert row["curve"][-1]["epoch"] < 200  # stopped, not trained to the end
 
 
-def test_every_benchmark_describes_the_machine_in_one_shape():
+def test_machine_record_from_a_child_matches_this_process():
     """The child process (what launchers use, so they never hold the device) reports
     what this process does, and the throughput plot labels a record of that shape."""
     from benchmarks import machine, plot_throughput
@@ -136,4 +136,22 @@ def test_every_benchmark_describes_the_machine_in_one_shape():
     assert machine.versions()["jax"] == jax.__version__
     assert machine.versions()["mujoco"] == mujoco.__version__
     label = plot_throughput.machine_label({"machine": here})
-    assert label == f"CPU, {here['cpu_count']} cores"
+    cpu = here["device_kind"] == "cpu"
+    assert label == (f"CPU, {here['cpu_count']} cores" if cpu else here["device_kind"])
+
+
+def test_launcher_benchmarks_never_start_jax_in_their_own_process():
+    """time_to_target and first_epoch time train.py in children; JAX in the parent would
+    take a GPU's memory from the run being timed."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys; from benchmarks import first_epoch, machine, time_to_target; "
+        "machine.versions(); print('jax' in sys.modules, 'jaxlib' in sys.modules)"
+    )
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, "-c", probe], cwd=root, capture_output=True, text=True, check=False
+    )
+    assert done.stdout.split() == ["False", "False"], done.stderr

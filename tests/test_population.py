@@ -308,19 +308,31 @@ def test_archive_keeps_what_compare_reads_and_leaves_checkpoints_out(tmp_path, c
         {k: v for k, v in r.items() if k != "grids"} for r in original
     ]
     # Refusals name what is wrong; nothing is overwritten.
+    assert json.loads((dest / "grid.json").read_text())["archived_from"] == str(grid)
     assert experiments.main(["archive", str(grid), str(dest)]) == 2
-    assert "already holds a grid" in capsys.readouterr().err
+    assert "not an empty folder" in capsys.readouterr().err
+    assert experiments.main(["archive", str(grid), str(log)]) == 2  # a file, not a folder
+    assert "not an empty folder" in capsys.readouterr().err
     assert experiments.main(["archive", str(tmp_path), str(tmp_path / "x")]) == 2
     assert "not an experiment grid" in capsys.readouterr().err
+    (grid / "full" / "seed1" / "config.json").write_text("{not json")
+    assert experiments.main(["archive", str(grid), str(tmp_path / "y")]) == 2
+    assert "Expecting property name" in capsys.readouterr().err
+    assert not (tmp_path / "y").exists()  # nothing written before every file was read
     (grid / "full" / "seed1" / "config.json").unlink()
     assert experiments.main(["archive", str(grid), str(tmp_path / "y")]) == 2
     assert "full/seed1/config.json" in capsys.readouterr().err
+    record = json.loads((grid / "grid.json").read_text())
+    record["members"][0]["run_dir"] = "../elsewhere"
+    (grid / "grid.json").write_text(json.dumps(record))
+    assert experiments.main(["archive", str(grid), str(tmp_path / "y")]) == 2
+    assert "outside the grid: ../elsewhere" in capsys.readouterr().err
     assert not (tmp_path / "y").exists()
 
 
 def test_committed_learner_grids_are_archives_compare_reads(tmp_path):
-    """The grid records under benchmarks/learners are what archive writes: archiving one
-    again changes no figure of its comparison."""
+    """A committed grid record under benchmarks/learners reads as its grid did, and
+    archiving it again changes no figure of its comparison."""
     committed = Path(experiments.__file__).parents[1] / "benchmarks" / "learners" / "et" / "layernorm"
     again = tmp_path / "again"
     experiments.archive_grid(committed, again)

@@ -924,3 +924,35 @@ def test_replay_ratio_sets_the_updates_as_the_env_count_changes():
     assert delayed.ddpg.updates_per_iteration == 3  # 2.5 rounds to one interval of 3
     with pytest.raises(ValueError, match="--replay-ratio"):
         dataclasses.replace(cpu, replay_ratio=-1.0)
+
+
+@pytest.mark.parametrize(
+    "error, code",
+    [
+        (training.TrainingDiverged("every run diverged"), 3),
+        (ValueError("--epochs must be positive"), 2),
+        (checkpoint.CheckpointError("no intact checkpoint"), 2),
+        (FileExistsError("runs/x already holds a run"), 2),
+    ],
+)
+def test_training_commands_report_refusals_and_divergence_as_exit_codes(error, code, capsys):
+    from mjx_hands import train_cli
+
+    def start():
+        raise error
+
+    assert train_cli.reported(start) == (None, code)
+    assert capsys.readouterr().err == f"error: {error}\n"
+    assert train_cli.reported(lambda: {"epochs": 1}) == ({"epochs": 1}, 0)
+
+
+@pytest.mark.parametrize("passes", [SystemExit(0), KeyboardInterrupt(), RuntimeError("bug")])
+def test_training_commands_let_help_interrupts_and_bugs_through(passes):
+    """--help exits, Ctrl-C is handled by the loop, and a bug keeps its traceback."""
+    from mjx_hands import train_cli
+
+    def start():
+        raise passes
+
+    with pytest.raises(type(passes)):
+        train_cli.reported(start)
