@@ -611,9 +611,11 @@ def _grouped(labelled: list[tuple[str, Path]]) -> dict[str, list[Path]]:
     return groups
 
 
-def _merged(grid_dirs: list[Path], variant: str) -> dict[str, Any]:
+def _merged(grid_dirs: list[Path], variant: str, env_steps: int | None = None) -> dict[str, Any]:
     """The members of ``variant`` of several grids of one task as one grid record; each
-    member also carries its ``grid_dir``, and its wall clock is per run (see below)."""
+    member also carries its ``grid_dir``, and its wall clock is per run (see below).
+    ``env_steps``: only the evaluations up to that budget (a longer grid read as if it
+    had stopped there)."""
     grids = [load_grid(d) for d in grid_dirs]
     tasks = {g["task"] for g in grids}
     if len(tasks) > 1:
@@ -629,6 +631,7 @@ def _merged(grid_dirs: list[Path], variant: str) -> dict[str, Any]:
             "evals": [
                 r | {"time/wall_seconds": r.get("time/wall_seconds", math.nan) / len(g["members"])}
                 for r in m["evals"]
+                if env_steps is None or r["train/env_steps"] <= env_steps
             ],
         }
         for g in grids
@@ -640,14 +643,16 @@ def _merged(grid_dirs: list[Path], variant: str) -> dict[str, Any]:
     return {"task": tasks.pop(), "dir": str(grid_dirs[0]), "members": members}
 
 
-def compare_learners(labelled: list[tuple[str, Path]], variant: str) -> list[dict[str, Any]]:
+def compare_learners(
+    labelled: list[tuple[str, Path]], variant: str, env_steps: int | None = None
+) -> list[dict[str, Any]]:
     """One row per label (the members of ``variant`` of its grids): mean +- SE over seeds
     of the :func:`seed_record` figures (seconds per run: the grid's wall clock over its
     member count), how many seeds met the targets, and Welch's p of the final success
-    against the first label's."""
+    against the first label's; with ``env_steps``, as at that budget."""
     rows = []
     for label, grid_dirs in _grouped(labelled).items():
-        grid = _merged(grid_dirs, variant)
+        grid = _merged(grid_dirs, variant, env_steps)
         members = grid["members"]
         seeds = [seed_record(m["evals"], _first_epoch_seconds(m["grid_dir"], m)) for m in members]
         row: dict[str, Any] = {"label": label, "task": grid["task"], "n_seeds": len(seeds)}
@@ -671,7 +676,9 @@ def compare_learners(labelled: list[tuple[str, Path]], variant: str) -> list[dic
     return rows
 
 
-def plot_learners(labelled: list[tuple[str, Path]], variant: str, path: Path) -> None:
+def plot_learners(
+    labelled: list[tuple[str, Path]], variant: str, path: Path, env_steps: int | None = None
+) -> None:
     """Success at the end, mean +- SE over seeds, against env steps and grid wall clock."""
     import matplotlib
 
@@ -681,7 +688,7 @@ def plot_learners(labelled: list[tuple[str, Path]], variant: str, path: Path) ->
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     task = ""
     for label, grid_dirs in _grouped(labelled).items():
-        grid = _merged(grid_dirs, variant)
+        grid = _merged(grid_dirs, variant, env_steps)
         task = grid["task"]
         c = curves(grid)[variant]
         for ax, x in zip(axes, (c["env_steps"], c["wall_seconds"] / 60)):
@@ -736,6 +743,9 @@ class CompareArgs:
     """Folder for learners.png, learners.csv/.json/.md."""
     variant: str = "full"
     """Reward variant of the grids to compare."""
+    env_steps: int | None = None
+    """Compare at this budget: each member's evaluations up to this many env steps per
+    run (grids trained for different lengths, side by side at the shorter one's)."""
 
 
 def parse_labelled(items: tuple[str, ...]) -> list[tuple[str, Path]]:
@@ -755,13 +765,15 @@ def compare_main(argv: list[str]) -> int:
     args = tyro.cli(CompareArgs, args=argv)
     try:
         labelled = parse_labelled(args.grids)
-        rows = compare_learners(labelled, args.variant)
+        if args.env_steps is not None and args.env_steps <= 0:
+            raise ValueError(f"--env-steps {args.env_steps}: expected a positive budget")
+        rows = compare_learners(labelled, args.variant, args.env_steps)
     except (FileNotFoundError, ValueError, KeyError, json.JSONDecodeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    plot_learners(labelled, args.variant, out / "learners.png")
+    plot_learners(labelled, args.variant, out / "learners.png", args.env_steps)
     (out / "learners.json").write_text(json.dumps(rows, indent=2))
     flat = [{k: v for k, v in r.items() if not isinstance(v, list)} for r in rows]
     with (out / "learners.csv").open("w", newline="") as f:

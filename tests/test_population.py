@@ -284,6 +284,13 @@ def test_compare_learners_from_grids(tmp_path, capsys):
     assert "| td3 | 3 | 0.60 ± 0.06 |" in (tmp_path / "cmp" / "learners.md").read_text()
     assert experiments.main(["compare", str(paper)]) == 2
     assert "expected LABEL=GRID_DIR" in capsys.readouterr().err
+    # At a 1,000-step budget each member's first evaluation is its last: 0.1 x seed.
+    (early,) = experiments.compare_learners([("ddpg", paper)], "full", env_steps=1500)
+    assert early["final_values"] == pytest.approx([0.0, 0.1, 0.2])
+    assert early["final_env_steps"] == 1000 and early["final_epoch"] == 5
+    argv = ["compare", f"ddpg={paper}", "--env-steps", "0", "--out", str(tmp_path / "x")]
+    assert experiments.main(argv) == 2
+    assert "--env-steps 0: expected a positive budget" in capsys.readouterr().err
 
 
 def test_archive_keeps_what_compare_reads_and_leaves_checkpoints_out(tmp_path, capsys):
