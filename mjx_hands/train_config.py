@@ -34,7 +34,8 @@ preset's: ``ddpg`` the paper's DDPG unchanged; ``ddpg-ln`` adds LayerNorm to eve
 hidden layer, the option five-seed evidence picked (clap 0.95 +- 0.02 at the end against
 DDPG's 0.84 +- 0.03, p = 0.03; handshake 0.84 +- 0.01 against 0.79 +- 0.07);
 ``td3`` adds TD3's clipped double Q, target smoothing and delayed actor, 3-step returns
-and LayerNorm (clap 0.91 +- 0.04). Evidence: benchmarks/RESULTS.md, "Learners".
+and LayerNorm (clap 0.91 +- 0.04), a reference: 3-step returns alone break the handshake
+(0.15 +- 0.04 at 320 k steps). Evidence: benchmarks/RESULTS.md, "Learners".
 ``--ddpg.*`` flags still override each option."""
 
 
@@ -68,7 +69,8 @@ class TrainConfig:
     there) or auto (native on CPUs, MJX elsewhere)."""
     algo: Literal["ddpg", "ddpg-ln", "td3", "sac", "ppo"] = "ddpg"
     """Learner: the paper's DDPG; ddpg-ln, the same with LayerNorm (the evidence's pick);
-    td3, with TD3's additions and 3-step returns (``LEARNER_OPTIONS``); or Brax's SAC /
+    td3, with TD3's additions and 3-step returns, a reference (its 3-step returns hurt
+    the handshake; ``LEARNER_OPTIONS``); or Brax's SAC /
     PPO on the same environment."""
     preset: Literal["auto", "cpu", "gpu"] = "auto"
     """Size of the run; auto picks by the device JAX finds."""
