@@ -1,6 +1,7 @@
 """Train a hand-interaction policy: the project's single command.
 
-    python train.py --task handshake            # the paper's DDPG, preset by device
+    python train.py --task handshake            # the project's setup (ddpg-ln), by device
+    python train.py --task et --profile paper   # the authors' environment and DDPG
     python train.py --task handclap --algo ddpg-ln  # with LayerNorm (the evidence's pick)
     python train.py --task et --no-imitation    # an ablation
     python train.py --run-dir runs/x --resume   # continue a run with its own config

@@ -49,7 +49,7 @@ import numpy as np
 from brax.envs.base import Env, State, Wrapper
 from flax import struct
 
-from mjx_hands import ik, mocap, physics, reward_params, rewards, scene, spatial, tasks
+from mjx_hands import ik, mocap, physics, profiles, reward_params, rewards, scene, spatial, tasks
 from mjx_hands import shadow_hand as sh
 from mjx_hands.contract import InteractionEnv
 
@@ -85,6 +85,7 @@ def place_target(
 
 
 DEMO_SETS = ("authors", "all")
+PAPER_UNOBSERVED_LINKS = ("forearm", "lfmetacarpal")
 
 
 def select_demos(demos: list, task: str, which: str) -> list:
@@ -160,9 +161,9 @@ def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
                 "give either weights or reward/imitation/knobs"
             )
         return config.weights
-    base = reward_params.task_weights(config.task, config.knobs)
-    weights = reward_params.variant(config.reward, base)
-    return weights if config.imitation else dataclasses.replace(weights, imitation=False)
+    return profiles.reward_weights(
+        config.profile, config.task, config.reward, config.imitation, config.knobs
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,6 +172,9 @@ class EnvConfig:
 
     task: str = "handshake"
     """Interaction: 'handshake', 'handclap' or 'et'."""
+    profile: str = "project"
+    """'project' (the project's observation, contact rule, weights and target box) or
+    'paper' (the authors' environment): see ``mjx_hands.profiles``."""
     reward: str = "full"
     """Reward variant: 'full', 'baseline1' (palm position), 'baseline2' (no contact),
     'no_imitation'."""
@@ -197,7 +201,8 @@ class EnvConfig:
     """Where the agent's palm centre is at the demonstrated contact when the target is
     at its nominal pose (world, metres; the shoulder is at the origin)."""
     target_box: tuple[float, float, float] = (0.05, 0.05, 0.05)
-    """Half-extent of the uniform box of target palm positions, metres."""
+    """Half-extent of the uniform box of target palm positions, metres (the project
+    profile's; the paper profile draws from the authors' per-task boxes)."""
     target_rotation_noise: float = 0.0
     """Std of the angle (radians) of a random rotation, about a uniformly random axis,
     applied to the target hand per episode (0: the task's nominal orientation; the
@@ -275,6 +280,8 @@ class HandInteractionEnv(Env):
     def __init__(self, config: EnvConfig = EnvConfig()):
         task = tasks.spec(config.task)
         self.config = config
+        self.profile = profiles.env_profile(config.profile)
+        self.target_box = profiles.target_box(config.profile, config.task, config.target_box)
         self.episode_length = config.episode_length or task.episode_length
         _check_motion(config)
         self.mj_model = scene.build_model(config.scene)
@@ -323,6 +330,11 @@ class HandInteractionEnv(Env):
         _, self.sensor_of_geom = physics.sensor_objects(m)
         self.target_mocap = np.array(
             [m.body_mocapid[m.body(scene.TARGET + link).id] for link in scene.TARGET_LINKS]
+        )
+        # The paper's observation: the target hand's links as the authors list them (palm,
+        # fingers' knuckle to distal, thumb): all mocap links but forearm and lf metacarpal.
+        self.observed_links = np.array(
+            [i for i, link in enumerate(scene.TARGET_LINKS) if link not in PAPER_UNOBSERVED_LINKS]
         )
         rest = mujoco.MjData(m)
         self.mocap_pos0, self.mocap_quat0 = rest.mocap_pos.copy(), rest.mocap_quat.copy()
@@ -415,8 +427,7 @@ class HandInteractionEnv(Env):
         start = jax.random.randint(k_start, (), 1, latest + 1)
         frame = jax.random.randint(k_frame, (), start, jnp.maximum(t_min, start) + 1)
 
-        box = jnp.asarray(self.config.target_box)
-        target_pos = self.target_center + jax.random.uniform(k_box, (3,), minval=-box, maxval=box)
+        target_pos = self.target_center + self._box_offset(k_box)
         if tilt is None:
             tilt = target_tilt(
                 k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
@@ -468,7 +479,7 @@ class HandInteractionEnv(Env):
             episode = episode.replace(
                 target_velocity=jnp.asarray(speed, jnp.float32) * random_direction(k_motion)
             )
-        features = self._features(self.physics.readings(data), episode)
+        features = self._features(self.physics.readings(data), episode, data)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
         metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
@@ -582,7 +593,7 @@ class HandInteractionEnv(Env):
         data = self.physics.step(data, self.ctrl_for(action))
         readings = self.physics.readings(data)
         episode = episode.replace(step=episode.step + 1)
-        features = self._features(readings, episode)
+        features = self._features(readings, episode, data)
 
         params = reward_params.with_variant(self.params, state.info["reward_weights"])
         p = jax.tree.map(lambda x: x[episode.demo], params)
@@ -674,7 +685,28 @@ class HandInteractionEnv(Env):
         return (points - episode.target_pos) @ episode.target_rot
 
     # --------------------------------------------------------------- features
-    def _features(self, readings: physics.Readings, episode: EpisodeInfo) -> dict[str, jax.Array]:
+    def _box_offset(self, rng: jax.Array) -> jax.Array:
+        """(3,) offset of the target palm from its nominal place, drawn from the
+        profile's box (a second draw only where the box has a shift)."""
+        box = self.target_box
+        offset = jax.random.uniform(
+            rng, (3,), minval=jnp.asarray(box.low), maxval=jnp.asarray(box.high)
+        )
+        if any(box.shift_low) or any(box.shift_high):
+            offset = offset + jax.random.uniform(
+                jax.random.fold_in(rng, 1),
+                (3,),
+                minval=jnp.asarray(box.shift_low),
+                maxval=jnp.asarray(box.shift_high),
+            )
+        axes = np.asarray(box.axes, np.float32)
+        if np.array_equal(axes, np.eye(3)):
+            return offset
+        return jnp.asarray(axes) @ offset
+
+    def _features(
+        self, readings: physics.Readings, episode: EpisodeInfo, data: Any
+    ) -> dict[str, jax.Array]:
         """Everything the reward and the observation read from the simulation."""
         p = jax.tree.map(lambda x: x[episode.demo], self.params)
         offsets, _, imitation_active = rewards.reference_at(p, episode.start_step + episode.step)
@@ -686,12 +718,26 @@ class HandInteractionEnv(Env):
             "qvel": readings.qvel,
             "points": readings.points,
             "hand_angles": readings.qpos[self.hand_qadr],
-            "contacts": readings.contacts,
+            "contacts": readings.touch
+            if self.profile.contact_rule == "touch"
+            else readings.contacts,
+            "target_links": data.mocap_pos[self.target_mocap[self.observed_links]],
             "imitation_points": imitation_points,
             "imitation_active": imitation_active.astype(jnp.float32),
         }
 
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
+        if self.profile.observation == "paper":
+            # The authors' _get_obs: joint angles, joint velocities x dt, the target
+            # hand's link positions (world) and the touch sensors; no goal, no time.
+            return jnp.concatenate(
+                [
+                    f["qpos"],
+                    self.config.control_dt * f["qvel"],
+                    f["target_links"].reshape(-1),
+                    f["contacts"],
+                ]
+            )
         relative_points = f["points"] - episode.target_pos
         phase = jnp.stack([episode.step / self.episode_length, f["imitation_active"]]).astype(
             jnp.float32

@@ -58,7 +58,8 @@ class Readings:
     qpos: jax.Array  # (nq,) joint positions
     qvel: jax.Array  # (nv,) joint velocities
     points: jax.Array  # (6, 3) agent palm centre + fingertips, world, HAND_POINTS order
-    contacts: jax.Array  # (15,) 0/1 per CONTACT_SENSORS
+    contacts: jax.Array  # (15,) 0/1 per CONTACT_SENSORS: a phalanx geom within contact_distance
+    touch: jax.Array  # (15,) 0/1 per CONTACT_SENSORS: force in the phalanx's touch site
     penetration: jax.Array  # () deepest agent-target interpenetration, metres (0: apart)
     finite: jax.Array  # () bool: the state holds no NaN or inf
 
@@ -100,6 +101,13 @@ def sensor_objects(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     return np.array(sites), sensor_of_geom
 
 
+def touch_sites(m: mujoco.MjModel) -> np.ndarray:
+    """The sites (15,) of the scene's touch sensors, ``CONTACT_SENSORS`` order."""
+    layout = scene.SENSOR_LAYOUT
+    by_adr = {int(m.sensor_adr[i]): i for i in range(m.nsensor)}
+    return np.array([int(m.sensor_objid[by_adr[a]]) for a in range(layout.touch.start, layout.touch.stop)])
+
+
 def _actuated_qpos_adr(m: mujoco.MjModel) -> np.ndarray:
     return np.array([m.jnt_qposadr[j] for j in m.actuator_trnid[:, 0]])
 
@@ -114,6 +122,8 @@ class MjxPhysics:
         self.n_substeps = n_substeps
         self.contact_distance = contact_distance
         self.point_sites, self.sensor_of_geom = sensor_objects(mj_model)
+        self.touch_sites = touch_sites(mj_model)
+        self.touch_size = np.asarray(mj_model.site_size[self.touch_sites], np.float32)
         self.actuated_qadr = _actuated_qpos_adr(mj_model)
         self.mjx_model = put_model(mj_model)
 
@@ -139,12 +149,22 @@ class MjxPhysics:
         geom_sensor = jnp.asarray(self.sensor_of_geom)[contact.geom]  # (ncon, 2)
         sensor = jnp.max(geom_sensor, axis=-1)  # the agent geom's sensor; target geoms are -1
         touching = contact.dist < self.contact_distance
-        hits = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS)) * touching[:, None]
+        one_hot = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS))  # (ncon, 15); -1: zeros
+        hits = one_hot * touching[:, None]
+        # MJX runs no sensor stage: a touch sensor reads a pressing contact (penetrating,
+        # so its normal force is > 0) whose point lies in the sensor's site box.
+        site = jnp.maximum(sensor, 0)
+        centre = data.site_xpos[self.touch_sites][site]  # (ncon, 3)
+        frame = data.site_xmat[self.touch_sites].reshape(-1, 3, 3)[site]  # (ncon, 3, 3)
+        local = jnp.einsum("cji,cj->ci", frame, contact.pos - centre)
+        inside = jnp.all(jnp.abs(local) <= jnp.asarray(self.touch_size)[site], axis=-1)
+        pressing = inside & (contact.dist < 0.0)
         return Readings(
             qpos=data.qpos,
             qvel=data.qvel,
             points=data.site_xpos[self.point_sites],
             contacts=jnp.max(hits, axis=0, initial=0.0),
+            touch=jnp.max(one_hot * pressing[:, None], axis=0, initial=0.0),
             penetration=jnp.maximum(-jnp.min(contact.dist, initial=jnp.inf), 0.0),
             finite=jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all(),
         )
@@ -244,6 +264,7 @@ class NativePhysics:
             qvel=state.qvel,
             points=state.sensordata[layout.points].reshape(len(sh.HAND_POINTS), 3),
             contacts=touching.astype(jnp.float32),
+            touch=(state.sensordata[layout.touch] > 0.0).astype(jnp.float32),
             penetration=jnp.where(found > 0, jnp.maximum(-dist, 0.0), 0.0),
             finite=jnp.isfinite(state.qpos).all() & jnp.isfinite(state.qvel).all(),
         )

@@ -133,12 +133,35 @@ class RewardWeights:
     """Reward contacts of the required sensors (Baseline 2 turns this off)."""
     imitation: bool = True
     """Add the imitation terms while the episode is before the demo's closest approach."""
+    contact_form: Literal["bonus", "penalty"] = "bonus"
+    """How ``K_c`` enters: ``bonus`` rewards ``K_c`` per required sensor in contact (the
+    paper's text, r_c >= 0); ``penalty`` charges ``K_c`` per required sensor out of contact
+    (the authors' code: ``W_f`` times the L1 error to their ``FORCE_GOALS``, r <= 0)."""
+    forbidden_contacts: tuple[str, ...] = ()
+    """Sensors (``CONTACT_SENSORS`` names) charged ``K_c`` while they touch (the authors'
+    ``FORCE_GOALS`` 0: the clap's thumb)."""
+    imitation_weights: Literal["relative", "absolute"] = "relative"
+    """``relative``: ``K_pI`` and ``K_alphaI`` scale the goal terms' weights (ω_pI = K_pI ω_p,
+    ω_αI = K_αI K_α, the project's); ``absolute``: they are the authors' ``W_ipos`` (times
+    Algorithm 1's point weights, closest point 1) and ``W_iang`` (per joint and radian),
+    independent of ``K_p`` and ``K_alpha``."""
 
     def __post_init__(self):
         if self.position_points not in ("fingertips", "palm"):
             raise ValueError(
                 f"position_points must be 'fingertips' or 'palm', got {self.position_points!r}"
             )
+        if self.contact_form not in ("bonus", "penalty"):
+            raise ValueError(
+                f"contact_form must be 'bonus' or 'penalty', got {self.contact_form!r}"
+            )
+        if self.imitation_weights not in ("relative", "absolute"):
+            raise ValueError(
+                "imitation_weights must be 'relative' or 'absolute', got "
+                f"{self.imitation_weights!r}"
+            )
+        for name in self.forbidden_contacts:
+            shadow_hand.sensor_index(name)  # names the sensor when it is unknown
         for name in KNOB_NAMES:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
@@ -230,10 +253,11 @@ class RewardParams:
     ref_target_joints: jax.Array  # (L, 20): target hand joint angles per control step
     w_position: jax.Array  # (6,): ω_p, zero for actor points the variant does not reward
     w_angle: jax.Array  # (20,): ω_α
-    w_contact: jax.Array  # (15,): ω_c, zero off the required sensors or without contacts
+    w_contact: jax.Array  # (15,): ω_c, > 0 required, < 0 forbidden, 0 elsewhere / no contacts
+    contact_bias: jax.Array  # (): b_c, -Σ of the required ω_c in the penalty form, else 0
     w_action: jax.Array  # (24,): ω_a over ARM_JOINTS + HAND_JOINTS controls
-    k_imitation_position: jax.Array  # (): K_pI, 0 when imitation is off
-    k_imitation_angle: jax.Array  # (): K_αI, 0 when imitation is off
+    w_imitation_position: jax.Array  # (6,): ω_pI, 0 when imitation is off
+    w_imitation_angle: jax.Array  # (20,): ω_αI, 0 when imitation is off
     required_contacts: jax.Array  # (15,) bool: sensors the contact term rewards
     success_groups: jax.Array  # (N_GROUPS, 15) bool: one sensor of each must touch
 
@@ -251,9 +275,10 @@ class VariantWeights:
     w_position: jax.Array  # (n_demos, 6)
     w_angle: jax.Array  # (n_demos, 20)
     w_contact: jax.Array  # (n_demos, 15)
+    contact_bias: jax.Array  # (n_demos,)
     w_action: jax.Array  # (n_demos, 24)
-    k_imitation_position: jax.Array  # (n_demos,)
-    k_imitation_angle: jax.Array  # (n_demos,)
+    w_imitation_position: jax.Array  # (n_demos, 6)
+    w_imitation_angle: jax.Array  # (n_demos, 20)
 
 
 VARIANT_FIELDS = tuple(f.name for f in dataclasses.fields(VariantWeights))
@@ -398,10 +423,23 @@ def algorithm1(
     # Normalise by the closest *selected* point: d_min for fingertips, the palm itself
     # for Baseline 1, so that the rewarded point nearest to the target weighs K_p.
     floored = np.maximum(d_goal, DISTANCE_FLOOR)
-    w_position = np.zeros(N_POINTS)
-    w_position[selected] = weights.K_p * floored[selected].min() / floored[selected]
+    point_shape = np.zeros(N_POINTS)  # Algorithm 1's ratios, the closest selected point 1
+    point_shape[selected] = floored[selected].min() / floored[selected]
+    w_position = weights.K_p * point_shape
+    on = 1.0 if weights.imitation else 0.0
+    if weights.imitation_weights == "relative":
+        w_imitation_position = on * weights.K_pI * w_position
+        w_imitation_angle = np.full(N_JOINTS, on * weights.K_alphaI * weights.K_alpha)
+    else:
+        w_imitation_position = on * weights.K_pI * point_shape
+        w_imitation_angle = np.full(N_JOINTS, on * weights.K_alphaI)
 
     required = required_contact_mask(demo.task)
+    forbidden = np.zeros(N_SENSORS, bool)
+    forbidden[[shadow_hand.sensor_index(n) for n in weights.forbidden_contacts]] = True
+    k_c = weights.K_c if weights.contact else 0.0
+    w_contact = k_c * (required.astype(np.float64) - forbidden)
+    contact_bias = -k_c * required.sum() if weights.contact_form == "penalty" else 0.0
     f32 = lambda x: np.asarray(x, np.float32)
     i32 = lambda x: np.asarray(x, np.int32)
     return RewardParams(
@@ -423,10 +461,11 @@ def algorithm1(
         ref_target_joints=f32(_resample(np.asarray(demo.target_joints, np.float64), frames)),
         w_position=f32(w_position),
         w_angle=f32(np.full(N_JOINTS, weights.K_alpha)),
-        w_contact=f32(required * weights.K_c if weights.contact else np.zeros(N_SENSORS)),
+        w_contact=f32(w_contact),
+        contact_bias=f32(contact_bias),
         w_action=f32(np.full(N_CONTROLS, weights.K_a)),
-        k_imitation_position=f32(weights.K_pI if weights.imitation else 0.0),
-        k_imitation_angle=f32(weights.K_alphaI if weights.imitation else 0.0),
+        w_imitation_position=f32(w_imitation_position),
+        w_imitation_angle=f32(w_imitation_angle),
         required_contacts=required,
         success_groups=success_group_mask(demo.task),
     )

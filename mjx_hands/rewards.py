@@ -4,10 +4,14 @@
 
 * ``r_p  = -Σ_i ω^i_p ||p^i_g - p^i_r||``        goal positions of the actor points
 * ``r_α  = -Σ_i ω^i_α |α^i_g - α^i_r|``          goal hand joint angles
-* ``r_c  =  Σ_i ω^i_c 1[sensor i touches]``      required contacts
+* ``r_c  =  Σ_i ω^i_c 1[sensor i touches] + b_c`` required (ω_c > 0) and forbidden
+  (ω_c < 0) contacts; ``b_c`` makes the authors' form ``-K_c Σ_required 1[apart]``
 * ``r_a  = -Σ_i ω^i_a (a^i)^2``                  control effort
-* ``r_pI = -K_pI Σ_i ω^i_p ||p^i_gt - p^i_r||``  imitation of the demo's positions
-* ``r_αI = -K_αI Σ_i ω^i_α |α^i_gt - α^i_r|``    imitation of the demo's angles
+* ``r_pI = -Σ_i ω^i_pI ||p^i_gt - p^i_r||``     imitation of the demo's positions
+* ``r_αI = -Σ_i ω^i_αI |α^i_gt - α^i_r|``       imitation of the demo's angles
+
+(the project's ``ω_pI = K_pI ω_p``, ``ω_αI = K_αI ω_α``; the authors' are absolute,
+see :class:`mjx_hands.reward_params.RewardWeights`).
 
 Every function accepts any leading batch dimensions (``...``); weights come from
 :class:`mjx_hands.reward_params.RewardParams`, where a variant's unused points or
@@ -50,9 +54,12 @@ def angle_reward(goal_angles: jax.Array, angles: jax.Array, w: jax.Array) -> jax
     return -jnp.sum(w * jnp.abs(goal_angles - angles), axis=-1)
 
 
-def contact_reward(contacts: jax.Array, w: jax.Array) -> jax.Array:
-    """``Σ_i w_i c_i``; contacts (..., 15) as 0/1 floats, w (..., 15) -> (...,)."""
-    return jnp.sum(w * contacts, axis=-1)
+def contact_reward(contacts: jax.Array, w: jax.Array, bias: jax.Array = 0.0) -> jax.Array:
+    """``Σ_i w_i c_i + bias``; contacts (..., 15) as 0/1 floats, w (..., 15), bias (...)
+    -> (...,). A negative ``w_i`` charges a contact that must not happen; ``bias`` =
+    ``-Σ_required w_i`` turns the bonus per contact into the authors' charge per required
+    sensor out of contact (a reward <= 0)."""
+    return jnp.sum(w * contacts, axis=-1) + bias
 
 
 def action_reward(action: jax.Array, w: jax.Array) -> jax.Array:
@@ -61,27 +68,26 @@ def action_reward(action: jax.Array, w: jax.Array) -> jax.Array:
 
 
 def imitation_position_reward(
-    ref_pos: jax.Array, point_pos: jax.Array, w: jax.Array, k: jax.Array, active: jax.Array
+    ref_pos: jax.Array, point_pos: jax.Array, w: jax.Array, active: jax.Array
 ) -> jax.Array:
-    """``-K_pI Σ_i ω^i_p ||p^i_gt - p^i_r||`` while ``active``, else 0.
+    """``-Σ_i ω^i_pI ||p^i_gt - p^i_r||`` while ``active``, else 0.
 
     Args:
       ref_pos: (..., 6, 3) the demonstration's actor points at this step, on the sim target.
       point_pos: (..., 6, 3) the agent's palm centre and fingertips.
-      w: (..., 6) position weights ω_p.
-      k: (...) K_pI (0 when imitation is off).
+      w: (..., 6) imitation position weights ω_pI (0 when imitation is off).
       active: (...) bool, the step is within the demo's imitation length.
     Returns:
       (...,)
     """
-    return jnp.where(active, k * position_reward(ref_pos, point_pos, w), 0.0)
+    return jnp.where(active, position_reward(ref_pos, point_pos, w), 0.0)
 
 
 def imitation_angle_reward(
-    ref_angles: jax.Array, angles: jax.Array, w: jax.Array, k: jax.Array, active: jax.Array
+    ref_angles: jax.Array, angles: jax.Array, w: jax.Array, active: jax.Array
 ) -> jax.Array:
-    """``-K_αI Σ_i ω^i_α |α^i_gt - α^i_r|`` while ``active``, else 0; angles (..., 20)."""
-    return jnp.where(active, k * angle_reward(ref_angles, angles, w), 0.0)
+    """``-Σ_i ω^i_αI |α^i_gt - α^i_r|`` while ``active``, else 0; angles and w (..., 20)."""
+    return jnp.where(active, angle_reward(ref_angles, angles, w), 0.0)
 
 
 def _take(x: jax.Array, index: jax.Array, trail_ndim: int) -> jax.Array:
@@ -187,13 +193,13 @@ def compute_rewards(
     terms = {
         "position": position_reward(goal, hand_points, params.w_position),
         "angle": angle_reward(params.goal_angles, hand_angles, params.w_angle),
-        "contact": contact_reward(contacts, params.w_contact),
+        "contact": contact_reward(contacts, params.w_contact, params.contact_bias),
         "action": action_reward(action, params.w_action),
         "imitation_position": imitation_position_reward(
-            ref_pos, hand_points, params.w_position, params.k_imitation_position, active
+            ref_pos, hand_points, params.w_imitation_position, active
         ),
         "imitation_angle": imitation_angle_reward(
-            ref_angles, hand_angles, params.w_angle, params.k_imitation_angle, active
+            ref_angles, hand_angles, params.w_imitation_angle, active
         ),
     }
     terms["total"] = sum(terms[t] for t in TERMS)

@@ -25,8 +25,10 @@ What every physics implementation reads is defined here once, as MuJoCo sensors
 (``SENSOR_LAYOUT`` gives their slices of ``sensordata``): the palm centre and the five
 fingertip sites (``framepos``), the 15 contact sensors of ``CONTACT_SENSORS`` (one
 ``contact`` sensor per phalanx collision geom: how many contacts it has and the
-distance of the closest) and the closest agent-target contact (for the
-penetration-free starts).
+distance of the closest), the closest agent-target contact (for the
+penetration-free starts) and 15 ``touch`` sensors (summed normal force, newtons, of the
+contacts inside a box site on the palmar side of each phalanx: the authors' sensors,
+``TOUCH_SITES``).
 A phalanx touches the target when its geom is closer than the environment's
 ``contact_distance``: MJX lists every candidate pair with its distance, native MuJoCo
 only pairs within their margin, so ``physics.NativePhysics`` gives its copy of the
@@ -91,17 +93,35 @@ class SensorLayout:
     contacts: slice  # (15 * 2,) per phalanx geom (CONTACT_SENSORS order): number of
     #                  contacts, distance of the closest one
     closest: slice  # (2,) number of agent-target contacts, distance of the closest one
+    touch: slice  # (15,) touch sensors (CONTACT_SENSORS order): normal force in the site, N
     size: int
 
 
 _N_CONTACT = 2 * len(sh.CONTACT_SENSORS)
 _N_POINTS = 3 * len(sh.HAND_POINTS)
+_N_TOUCH = len(sh.CONTACT_SENSORS)
 SENSOR_LAYOUT = SensorLayout(
     contacts=slice(0, _N_CONTACT),
     points=slice(_N_CONTACT, _N_CONTACT + _N_POINTS),
     closest=slice(_N_CONTACT + _N_POINTS, _N_CONTACT + _N_POINTS + 2),
-    size=_N_CONTACT + _N_POINTS + 2,
+    touch=slice(_N_CONTACT + _N_POINTS + 2, _N_CONTACT + _N_POINTS + 2 + _N_TOUCH),
+    size=_N_CONTACT + _N_POINTS + 2 + _N_TOUCH,
 )
+
+_TOUCH_BOX = (0.009, 0.004, 0.013)
+TOUCH_SITES: dict[str, tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]] = {
+    **{f"{f}_middle": ((0, -0.005, 0.02), _TOUCH_BOX, (0, 0, 0)) for f in ("ff", "mf", "rf")},
+    "lf_middle": ((0, -0.006, 0.015), _TOUCH_BOX, (0, 0, 0)),
+    "th_middle": ((-0.007, 0, 0.015), _TOUCH_BOX, (0, 0.05, 1.57)),
+    # The authors' proximal sensors are unused by every task; these are the project's
+    # (the middle phalanx's box, centred on the longer proximal phalanx).
+    **{f"{f}_proximal": ((0, -0.007, 0.0225), _TOUCH_BOX, (0, 0, 0)) for f in ("ff", "mf", "rf", "lf")},
+    "th_proximal": ((-0.007, 0, 0.019), _TOUCH_BOX, (0, 0.05, 1.57)),
+}  # fmt: skip
+"""Touch sites added to the hand: sensor -> (pos, box half-sizes, euler) in the phalanx
+body's frame. The middle ones are the authors' ``Tch_*tip_m`` sites (their
+``robot.xml``); the distal ones are the stock model's ``Tch_*tip`` sites, the authors'
+``Tch_*tip``."""
 
 # mjtConDataBit bits of a contact sensor's data (found, dist) and its reductions.
 _CONDATA_FOUND, _CONDATA_DIST = 1 << 0, 1 << 3
@@ -253,6 +273,30 @@ def _add_sensors(world: mujoco.MjSpec) -> None:
         type=mujoco.mjtSensor.mjSENS_CONTACT,
         intprm=[_CONDATA_FOUND | _CONDATA_DIST, _REDUCE_MINDIST, 1],
     )
+    for sensor in sh.CONTACT_SENSORS:
+        finger, phalanx = sensor.split("_")
+        site = f"Tch_{finger}tip" if phalanx == "distal" else f"Tch_{sensor}"
+        world.add_sensor(
+            name=f"touch/{sensor}",
+            type=mujoco.mjtSensor.mjSENS_TOUCH,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=AGENT + sh.hand_name(site),
+        )
+
+
+def _add_touch_sites(world: mujoco.MjSpec) -> None:
+    """The middle and proximal phalanges' touch sites of ``TOUCH_SITES`` on the agent."""
+    for sensor, (pos, size, euler) in TOUCH_SITES.items():
+        finger, phalanx = sensor.split("_")
+        body = world.body(AGENT + sh.hand_name(sh.PHALANX_BODY[(finger, phalanx)]))
+        site = body.add_site(
+            name=AGENT + sh.hand_name(f"Tch_{sensor}"),
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=list(pos),
+            size=list(size),
+            group=4,
+        )
+        site.alt.euler = list(euler)
 
 
 def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
@@ -265,6 +309,7 @@ def build_spec(cfg: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     _add_agent(world)
     _add_target(world, hand_kinematics.hand_model())
     _add_pairs(world, cfg)
+    _add_touch_sites(world)
     _add_sensors(world)
     world.add_numeric(name="max_geom_pairs", data=[cfg.max_geom_pairs])
     world.add_numeric(name="max_contact_points", data=[cfg.max_contact_points])

@@ -11,7 +11,8 @@ T = TypeVar("T")
 
 USAGE = """Train a hand-interaction policy: the project's single command.
 
-    python train.py --task handshake            # the paper's DDPG, preset by device
+    python train.py --task handshake            # the project's setup (ddpg-ln), preset by device
+    python train.py --task et --profile paper   # the authors' environment and DDPG
     python train.py --task handclap --algo ddpg-ln  # with LayerNorm (the evidence's pick)
     python train.py --task et --no-imitation    # an ablation
     python train.py --run-dir runs/x --resume   # continue a run with its own config
@@ -52,11 +53,16 @@ def default_config(argv: list[str]):
 
 
 def preset_default(argv: list[str]):
-    """The preset --preset names (auto by default) for the learner --algo names."""
-    from mjx_hands import train_config
+    """The preset --preset names (auto by default) for the profile --profile names and
+    the learner --algo names (default: the profile's, ``RECOMMENDED_ALGO``)."""
+    from mjx_hands import profiles, train_config
 
+    profile = profiles.check(option(argv, "--profile") or "project")
     return train_config.preset(
-        option(argv, "--preset") or "auto", algo=option(argv, "--algo") or "ddpg"
+        option(argv, "--preset") or "auto",
+        profile=profile,
+        task=option(argv, "--task") or "handshake",
+        algo=option(argv, "--algo") or train_config.RECOMMENDED_ALGO[profile],
     )
 
 

@@ -12,7 +12,7 @@ from typing import Any, Literal
 
 import jax
 
-from mjx_hands import checkpoint, reward_params, tasks
+from mjx_hands import checkpoint, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
@@ -46,6 +46,12 @@ class TrainConfig:
 
     task: Task = "handshake"
     """Interaction to learn."""
+    profile: profiles.Profile = "project"
+    """Environment and learner: 'project' (the project's observation, contact rule,
+    weights and target box; ``--algo ddpg-ln`` by default) or 'paper' (the authors'
+    environment: their observation, touch sensors, per-task and per-variant weights, reward
+    <= 0 with the critic target clipped to [-T, 0], target boxes, and their DDPG's replay
+    ratio, buffer and 50-epoch budget). See ``mjx_hands.profiles``."""
     reward: Literal["full", "baseline1", "baseline2"] = "full"
     """Reward: the paper's full reward, baseline1 (palm position only), baseline2
     (no contact term)."""
@@ -54,7 +60,9 @@ class TrainConfig:
     knobs: reward_params.RewardKnobs = reward_params.RewardKnobs()
     """The reward's six knobs (``--knobs.K-p 4`` ...); unset ones take the task's own
     (``tasks.TaskSpec.reward_knobs``: the handshake the authors' K_p 4, K_c 0.5, K_alpha
-    0; the clap and E.T. K_p 1, K_c 0.2, K_alpha 0.1). config.json records every value."""
+    0; the clap and E.T. K_p 1, K_c 0.2, K_alpha 0.1). config.json records every value.
+    Under ``--profile paper`` unset knobs take the authors' config of each variant, and
+    set ones override every variant's."""
     mocap: str | None = None
     """Folder of demonstrations; default: the authors' recordings in
     ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
@@ -156,8 +164,17 @@ def updates_for_ratio(ddpg: DDPGConfig, num_envs: int, ratio: float) -> DDPGConf
     return dataclasses.replace(ddpg, updates_per_iteration=updates)
 
 
+RECOMMENDED_ALGO = {"project": "ddpg-ln", "paper": "ddpg"}
+"""The learner each profile trains without ``--algo``: the project's evidence's pick, the
+paper's DDPG."""
+
+
 def preset(kind: str, **overrides: Any) -> TrainConfig:
-    """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs)."""
+    """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs).
+
+    With ``profile='paper'`` the learner's sizes and budget are the authors'
+    (:func:`mjx_hands.profiles.paper_learner` of ``task``) on either preset, evaluation
+    batch and checkpointing the preset's."""
     if kind == "auto":
         kind = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "cpu"
     if kind == "cpu":
@@ -196,6 +213,13 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
         )
     else:
         raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
+    if overrides.get("profile") == "paper":
+        paper = profiles.paper_learner(overrides.get("task", base.task))
+        base = dataclasses.replace(
+            base,
+            **{k: v for k, v in paper.items() if k != "ddpg"},
+            ddpg=dataclasses.replace(base.ddpg, **paper["ddpg"]),
+        )
     algo = overrides.get("algo", base.algo)
     base = dataclasses.replace(base, ddpg=learner_config(algo, base.ddpg))
     return dataclasses.replace(base, **overrides)
@@ -219,7 +243,10 @@ def read_config_json(path: Path) -> dict[str, Any]:
 
 
 def resolved(config: TrainConfig) -> TrainConfig:
-    """``config`` with every reward knob a number (the task's own where unset)."""
+    """``config`` with every reward knob a number (the task's own where unset); under the
+    paper profile unset knobs stay unset (each variant has the authors' own)."""
+    if config.profile == "paper":
+        return config
     return dataclasses.replace(config, knobs=reward_params.task_knobs(config.task, config.knobs))
 
 
@@ -232,7 +259,10 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
-    data["knobs"] = _knobs_from_json(data.get("knobs"), data.get("task", "handshake"))
+    if data.get("profile", "project") == "paper":
+        data["knobs"] = reward_params.RewardKnobs(**(data.get("knobs") or {}))
+    else:
+        data["knobs"] = _knobs_from_json(data.get("knobs"), data.get("task", "handshake"))
     ddpg = dict(data.pop("ddpg"))
     for key in ("hidden_sizes", "target_clip", "value_range"):
         if ddpg.get(key) is not None:
@@ -255,6 +285,7 @@ def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
 # the networks' and buffers' shapes. Everything else (learning rates, budget) may change.
 RESUME_FIXED = (
     "task",
+    "profile",
     "reward",
     "imitation",
     "knobs",

@@ -28,6 +28,25 @@ from mjx_hands.train_config import TrainConfig, check_population, program_config
 
 
 # ---------------------------------------------------------------- build
+def env_config(config: TrainConfig):
+    """The environment config of a run: the one place a ``TrainConfig`` becomes an
+    ``EnvConfig``."""
+    from mjx_hands import env as env_lib
+
+    return env_lib.EnvConfig(
+        task=config.task,
+        profile=config.profile,
+        reward=config.reward,
+        imitation=config.imitation,
+        knobs=config.knobs,
+        mocap_source=config.mocap_source,
+        mocap_path=config.mocap,
+        demos=config.demos,
+        target_rotation_noise=config.target_rotation_noise,
+        physics=config.physics,
+    )
+
+
 def make_envs(config: TrainConfig, num_devices: int):
     """(train env, eval env, single env) with per-device batch sizes."""
     from mjx_hands import env as env_lib
@@ -38,19 +57,7 @@ def make_envs(config: TrainConfig, num_devices: int):
                 f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
                 f"the {num_devices} devices"
             )
-    single = env_lib.HandInteractionEnv(
-        env_lib.EnvConfig(
-            task=config.task,
-            reward=config.reward,
-            imitation=config.imitation,
-            knobs=config.knobs,
-            mocap_source=config.mocap_source,
-            mocap_path=config.mocap,
-            demos=config.demos,
-            target_rotation_noise=config.target_rotation_noise,
-            physics=config.physics,
-        )
-    )
+    single = env_lib.HandInteractionEnv(env_config(config))
     train_env = env_lib.BatchedEnv(single, config.num_envs // num_devices)
     eval_env = env_lib.BatchedEnv(single, config.eval_envs // num_devices)
     return train_env, eval_env, single
@@ -163,16 +170,7 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
         return None
     from mjx_hands import env as env_lib
 
-    weights = [
-        single.variant_for(
-            env_lib.reward_weights(
-                env_lib.EnvConfig(
-                    task=c.task, reward=c.reward, imitation=c.imitation, knobs=c.knobs
-                )
-            )
-        )
-        for c in configs
-    ]
+    weights = [single.variant_for(env_lib.reward_weights(env_config(c))) for c in configs]
     return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
 
 

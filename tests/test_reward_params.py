@@ -202,9 +202,14 @@ def test_matches_loop_reference(fps, name):
         required[rp.shadow_hand.CONTACT_SENSORS.index(s)] = True
     np.testing.assert_array_equal(p.required_contacts, required)
     np.testing.assert_allclose(p.w_contact, required * weights.K_c * weights.contact, rtol=1e-6)
+    assert float(p.contact_bias) == 0.0  # the bonus form
     k_on = 1.0 if weights.imitation else 0.0
-    assert float(p.k_imitation_position) == pytest.approx(weights.K_pI * k_on)
-    assert float(p.k_imitation_angle) == pytest.approx(weights.K_alphaI * k_on)
+    np.testing.assert_allclose(
+        p.w_imitation_position, weights.K_pI * k_on * ref["w_position"], rtol=1e-6
+    )
+    np.testing.assert_allclose(
+        p.w_imitation_angle, np.full(20, weights.K_alphaI * k_on * weights.K_alpha), rtol=1e-6
+    )
     check_alg1_plausible(p, demo, weights)
 
 

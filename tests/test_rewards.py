@@ -39,10 +39,11 @@ def random_params(rng, batch=()) -> RewardParams:
         ref_target_joints=u(L, 20),
         w_position=pos(6),
         w_angle=pos(20),
-        w_contact=pos(15) * (rng.uniform(size=batch + (15,)) < 0.5),
+        w_contact=pos(15) * rng.choice([-1.0, 0.0, 1.0], size=batch + (15,)).astype(np.float32),
+        contact_bias=-pos(),
         w_action=pos(24),
-        k_imitation_position=pos(),
-        k_imitation_angle=pos(),
+        w_imitation_position=pos(6),
+        w_imitation_angle=pos(20),
         required_contacts=rng.uniform(size=batch + (15,)) < 0.3,
         success_groups=rng.uniform(size=batch + (rp.N_GROUPS, 15)) < 0.2,
     )
@@ -87,7 +88,7 @@ def reference(p, step, x):
     r_a = 0.0
     for i in range(20):
         r_a -= p["w_angle"][i] * abs(p["goal_angles"][i] - x["hand_angles"][i])
-    r_c = 0.0
+    r_c = float(p["contact_bias"])
     for i in range(15):
         r_c += p["w_contact"][i] * (1.0 if x["contacts"][i] > 0.5 else 0.0)
     r_u = 0.0
@@ -96,11 +97,11 @@ def reference(p, step, x):
     r_pi = r_ai = 0.0
     if 0 <= step < int(p["imitation_length"]):
         for i in range(6):
-            r_pi -= p["w_position"][i] * dist(place(p["ref_offsets"][step][i]), x["hand_points"][i])
-        r_pi *= p["k_imitation_position"]
+            r_pi -= p["w_imitation_position"][i] * dist(
+                place(p["ref_offsets"][step][i]), x["hand_points"][i]
+            )
         for i in range(20):
-            r_ai -= p["w_angle"][i] * abs(p["ref_angles"][step][i] - x["hand_angles"][i])
-        r_ai *= p["k_imitation_angle"]
+            r_ai -= p["w_imitation_angle"][i] * abs(p["ref_angles"][step][i] - x["hand_angles"][i])
     terms = {
         "position": r_p, "angle": r_a, "contact": r_c, "action": r_u,
         "imitation_position": r_pi, "imitation_angle": r_ai,
@@ -163,10 +164,10 @@ def test_individual_terms_match_reference():
     terms = {
         "position": rewards.position_reward(goal, x["hand_points"], params.w_position),
         "angle": rewards.angle_reward(params.goal_angles, x["hand_angles"], params.w_angle),
-        "contact": rewards.contact_reward(x["contacts"], params.w_contact),
+        "contact": rewards.contact_reward(x["contacts"], params.w_contact, params.contact_bias),
         "action": rewards.action_reward(x["action"], params.w_action),
         "imitation_angle": rewards.imitation_angle_reward(
-            ref_ang, x["hand_angles"], params.w_angle, params.k_imitation_angle, active
+            ref_ang, x["hand_angles"], params.w_imitation_angle, active
         ),
     }
     for b in range(6):

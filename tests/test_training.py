@@ -617,7 +617,7 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
     assert resumed == train_config.resolved(config)  # tyro applies --epochs on top
     fresh = train_cli.default_config(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
-    assert fresh == train_config.preset("cpu")
+    assert fresh == train_config.preset("cpu", profile="project", algo="ddpg-ln")  # recommended
 
 
 def test_brax_wrapper_restarts_episodes_with_fresh_randomisation():
