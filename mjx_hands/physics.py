@@ -45,7 +45,9 @@ from mjx_hands import shadow_hand as sh
 
 PHYSICS = ("mjx", "native")
 NATIVE_CONTROL_SPEC = int(
-    mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+    mujoco.mjtState.mjSTATE_CTRL
+    | mujoco.mjtState.mjSTATE_MOCAP_POS
+    | mujoco.mjtState.mjSTATE_MOCAP_QUAT
 )
 """What ``mujoco.rollout`` takes per step beside the state: set-points and the target
 hand's mocap poses (the full-physics state has no mocap bodies)."""
@@ -101,11 +103,23 @@ def sensor_objects(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     return np.array(sites), sensor_of_geom
 
 
+def ray_hits_box(origin: jax.Array, direction: jax.Array, half: jax.Array) -> jax.Array:
+    """Whether rays from ``origin`` along ``direction`` (forward only) meet the boxes
+    ``±half`` (all (..., 3), box frame): the slab test. (..., 3) -> (...) bool."""
+    safe = jnp.where(jnp.abs(direction) < 1e-12, 1e-12, direction)
+    t1, t2 = (-half - origin) / safe, (half - origin) / safe
+    near = jnp.max(jnp.minimum(t1, t2), axis=-1)
+    far = jnp.min(jnp.maximum(t1, t2), axis=-1)
+    return far >= jnp.maximum(near, 0.0)
+
+
 def touch_sites(m: mujoco.MjModel) -> np.ndarray:
     """The sites (15,) of the scene's touch sensors, ``CONTACT_SENSORS`` order."""
     layout = scene.SENSOR_LAYOUT
     by_adr = {int(m.sensor_adr[i]): i for i in range(m.nsensor)}
-    return np.array([int(m.sensor_objid[by_adr[a]]) for a in range(layout.touch.start, layout.touch.stop)])
+    return np.array(
+        [int(m.sensor_objid[by_adr[a]]) for a in range(layout.touch.start, layout.touch.stop)]
+    )
 
 
 def _actuated_qpos_adr(m: mujoco.MjModel) -> np.ndarray:
@@ -151,14 +165,20 @@ class MjxPhysics:
         touching = contact.dist < self.contact_distance
         one_hot = jax.nn.one_hot(sensor, len(sh.CONTACT_SENSORS))  # (ncon, 15); -1: zeros
         hits = one_hot * touching[:, None]
-        # MJX runs no sensor stage: a touch sensor reads a pressing contact (penetrating,
-        # so its normal force is > 0) whose point lies in the sensor's site box.
+        # MJX runs no sensor stage. MuJoCo's touch sensor adds a contact's normal force
+        # when the ray from the contact point along the normal meets the site's box; its
+        # soft contacts push from within their margin (contact_distance natively), so
+        # here a contact within contact_distance whose ray meets the box reads as touch
+        # (tests/test_profiles.py measures the agreement; penetration alone missed half).
         site = jnp.maximum(sensor, 0)
         centre = data.site_xpos[self.touch_sites][site]  # (ncon, 3)
         frame = data.site_xmat[self.touch_sites].reshape(-1, 3, 3)[site]  # (ncon, 3, 3)
-        local = jnp.einsum("cji,cj->ci", frame, contact.pos - centre)
-        inside = jnp.all(jnp.abs(local) <= jnp.asarray(self.touch_size)[site], axis=-1)
-        pressing = inside & (contact.dist < 0.0)
+        agent_first = geom_sensor[:, 0] >= 0
+        normal = contact.frame[:, 0, :] * jnp.where(agent_first, 1.0, -1.0)[:, None]
+        origin = jnp.einsum("cji,cj->ci", frame, contact.pos - centre)
+        direction = jnp.einsum("cji,cj->ci", frame, normal)
+        hit = ray_hits_box(origin, direction, jnp.asarray(self.touch_size)[site])
+        pressing = hit & touching
         return Readings(
             qpos=data.qpos,
             qvel=data.qvel,
@@ -230,7 +250,9 @@ class NativePhysics:
         self._lock = threading.Lock()  # one rollout at a time (several devices may call)
         self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         if mujoco.mj_stateSize(m, self._state_spec) != 1 + m.nq + m.nv:
-            raise ValueError("NativePhysics expects a model without activations, history or plugins")
+            raise ValueError(
+                "NativePhysics expects a model without activations, history or plugins"
+            )
 
     # ---------------------------------------------------------------- Physics
     def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> NativeState:
@@ -298,9 +320,7 @@ class NativePhysics:
         lead = np.shape(qpos)[:-1]
         batch = int(np.prod(lead, dtype=np.int64))
         flat = lambda x, n: np.asarray(x, np.float64).reshape(batch, n)
-        initial = np.concatenate(
-            [flat(time, 1), flat(qpos, m.nq), flat(qvel, m.nv)], axis=1
-        )
+        initial = np.concatenate([flat(time, 1), flat(qpos, m.nq), flat(qvel, m.nv)], axis=1)
         control = np.concatenate(
             [flat(ctrl, m.nu), flat(mocap_pos, 3 * m.nmocap), flat(mocap_quat, 4 * m.nmocap)],
             axis=1,
