@@ -33,6 +33,12 @@ imitation offset      18    imitation reference minus current point (0 past t_mi
 target points         18    target palm + fingertips minus agent palm centre
 phase                  2    step / episode length, imitation-active flag
 ====================  ====  ================================================
+
+That is the project profile's. The paper profile (``EnvConfig.profile = "paper"``,
+``mjx_hands.profiles``) observes what the authors' environment does (134): agent qpos
+(28), qvel x control period (28), the target hand's 21 link positions in the world (63)
+and the 15 touch sensors (0/1); it draws the target from the authors' per-task boxes
+and reads contact from touch sensors.
 """
 
 from __future__ import annotations

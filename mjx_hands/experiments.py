@@ -252,7 +252,40 @@ def load_grid(grid_dir: Path) -> dict[str, Any]:
         metrics = Path(grid_dir) / m["run_dir"] / "metrics.csv"
         rows = _read_rows(metrics) if metrics.is_file() else []
         loaded.append(m | {"evals": [r for r in rows if HEADLINE in r]})
-    return {"task": record["task"], "dir": str(grid_dir), "members": loaded}
+    profile = record.get("train", {}).get("profile", "project")
+    for m in loaded:
+        m["source"] = str(grid_dir)
+    return {"task": record["task"], "profile": profile, "dir": str(grid_dir), "members": loaded}
+
+
+def merge_grids(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Grids of one task and profile as one (e.g. a grid trained in chunks of seeds), in
+    first-seen order; a (variant, seed) that two of them hold is an error naming both."""
+    merged: dict[tuple[str, str], dict[str, Any]] = {}
+    for grid in grids:
+        key = (grid["task"], grid.get("profile", "project"))
+        if key not in merged:
+            merged[key] = grid | {"members": list(grid["members"]), "dirs": [grid["dir"]]}
+            continue
+        into = merged[key]
+        held = {(m["variant"], m["seed"]): m["source"] for m in into["members"]}
+        for m in grid["members"]:
+            if (m["variant"], m["seed"]) in held:
+                raise ValueError(
+                    f"{m['variant']} seed {m['seed']} of {key[0]} ({key[1]} profile) is in "
+                    f"both {held[(m['variant'], m['seed'])]} and {grid['dir']}"
+                )
+            into["members"].append(m)
+        into["dirs"].append(grid["dir"])
+        into["dir"] = ", ".join(into["dirs"])
+    return list(merged.values())
+
+
+def authors_epochs(task: str, env_steps: np.ndarray) -> np.ndarray:
+    """Env steps per run in the authors' epochs: 50 cycles x 2 episodes of T steps."""
+    from mjx_hands import tasks
+
+    return np.asarray(env_steps) / (100 * tasks.spec(task).episode_length)
 
 
 def curves(grid: dict[str, Any], key: str = HEADLINE) -> dict[str, dict[str, np.ndarray]]:
@@ -305,6 +338,7 @@ def summarize(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 continue
             row: dict[str, Any] = {
                 "task": grid["task"],
+                "profile": grid.get("profile", "project"),
                 "variant": variant,
                 "n_seeds": len(runs),
                 "seeds": [m["seed"] for m in runs],
@@ -325,7 +359,51 @@ def summarize(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _lookup(summary: list[dict[str, Any]], task: str, variant: str) -> dict[str, Any] | None:
+    """``summary``'s row of (task, variant); ``summary`` holds one profile."""
     return next((r for r in summary if r["task"] == task and r["variant"] == variant), None)
+
+
+def holm(p_values: list[float]) -> list[float]:
+    """Holm-Bonferroni adjusted p-values (same order; NaN stays NaN): the family-wise
+    error over all of the statements' tests stays below ``ALPHA`` when each adjusted p is
+    compared with it."""
+    finite = sorted((p, i) for i, p in enumerate(p_values) if math.isfinite(p))
+    adjusted = [math.nan] * len(p_values)
+    running = 0.0
+    for rank, (p, i) in enumerate(finite):
+        running = max(running, min(1.0, (len(finite) - rank) * p))
+        adjusted[i] = running
+    return adjusted
+
+
+def _corrected(judged: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``judged`` with every Welch test's Holm-adjusted p (``p_holm``) over the family of
+    all of them, and each statement's verdict under it (``verdict_holm``)."""
+    tests = [t for s in judged for t in s["tests"] if "p" in t]
+    for t, adjusted in zip(tests, holm([t["p"] for t in tests])):
+        t["p_holm"] = adjusted
+        if t["verdict"] in ("held", "not held") and not adjusted < ALPHA:
+            t["verdict_holm"] = "not significant"
+        else:
+            t["verdict_holm"] = t["verdict"]
+    for s in judged:
+        parts = [t for t in s["tests"] if "verdict" in t]
+        for t in parts:
+            t.setdefault("verdict_holm", t["verdict"])  # untested parts
+        if not any("p" in t for t in parts):
+            s["verdict_holm"] = s["verdict"]  # statement 3 is one interval, no family
+        elif s["statement"].startswith("4."):  # held when no test is significant
+            tested = [t for t in parts if t["verdict"] != "not tested"]
+            s["verdict_holm"] = (
+                s["verdict"]
+                if not tested
+                else "held"
+                if all(t["verdict_holm"] == "not significant" for t in tested)
+                else "not held"
+            ) + (" (partly tested)" if tested and len(tested) < len(parts) else "")
+        else:
+            s["verdict_holm"] = _combine([t | {"verdict": t["verdict_holm"]} for t in parts])
+    return judged
 
 
 def _compare(summary, task, a, b, metric, better: str) -> dict[str, Any]:
@@ -485,18 +563,18 @@ def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
         for variant, c in grid_curves.items():
             color = COLORS.get(variant)
             label = f"{variant} (n={c['n']})"
-            for row, x in enumerate((c["env_steps"], c["wall_seconds"] / 60)):
+            epochs = authors_epochs(grid["task"], c["env_steps"])
+            for row, x in enumerate((epochs, c["wall_seconds"] / 60)):
                 ax = axes[row, column]
                 ax.plot(x, c["mean"], color=color, label=label)
                 ax.fill_between(x, c["mean"] - c["se"], c["mean"] + c["se"], color=color, alpha=0.2)
-        axes[0, column].set_title(grid["task"])
-        axes[0, column].set_xlabel("environment steps per run")
+        axes[0, column].set_title(f"{grid['task']} ({grid.get('profile', 'project')} profile)")
+        axes[0, column].set_xlabel("the authors' epochs (100 T env steps each)")
         axes[1, column].set_xlabel("wall clock of the grid, minutes")
         for ax in axes[:, column]:
             ax.set_ylim(-0.02, 1.02)
             ax.grid(alpha=0.3)
             ax.set_ylabel("success at the end of the episode")
-        axes[0, column].ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
         if grid_curves:
             axes[0, column].legend(loc="best", fontsize=8)
     fig.suptitle("Evaluation success at the last step, mean +- SE over seeds")
@@ -506,13 +584,19 @@ def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
 
 
 def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
-    """fig4.png, summary.csv/.json, statements.json/.md from ``grid_dirs`` into ``out_dir``."""
-    grids = [load_grid(d) for d in grid_dirs]
+    """fig4.png, summary.csv/.json, statements.json/.md from ``grid_dirs`` into ``out_dir``.
+
+    Grids of one task and profile merge (chunks of seeds); statements are judged per
+    profile, each with its verdict after Holm's correction over its tests."""
+    grids = merge_grids([load_grid(d) for d in grid_dirs])
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summarize(grids)
     if not summary:
         raise ValueError(f"no evaluations in {', '.join(map(str, grid_dirs))} yet")
-    judged = statements(summary)
+    judged = []
+    for profile in dict.fromkeys(r["profile"] for r in summary):
+        rows = [r for r in summary if r["profile"] == profile]
+        judged += [s | {"profile": profile} for s in _corrected(statements(rows))]
     plot_fig4(grids, out_dir / "fig4.png")
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     flat = [{k: v for k, v in r.items() if not isinstance(v, list)} for r in summary]
@@ -521,7 +605,10 @@ def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
         writer.writeheader()
         writer.writerows(flat)
     (out_dir / "statements.json").write_text(json.dumps(judged, indent=2))
-    lines = ["| statement | verdict | numbers |", "|---|---|---|"]
+    lines = [
+        "| profile | statement | verdict | after Holm's correction | numbers |",
+        "|---|---|---|---|---|",
+    ]
     for s in judged:
         numbers = "; ".join(
             ", ".join(
@@ -531,7 +618,10 @@ def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
             )
             for t in s["tests"]
         )
-        lines.append(f"| {s['statement']} | **{s['verdict']}** | {numbers} |")
+        lines.append(
+            f"| {s['profile']} | {s['statement']} | **{s['verdict']}** | "
+            f"{s['verdict_holm']} | {numbers} |"
+        )
     (out_dir / "statements.md").write_text("\n".join(lines) + "\n")
     return {"summary": summary, "statements": judged}
 
@@ -555,12 +645,13 @@ def report_main(argv: list[str]) -> int:
         return 2
     for row in result["summary"]:
         print(
-            f"{row['task']:9s} {row['variant']:13s} n={row['n_seeds']}  success at the end "
+            f"{row['task']:9s} {row['profile']:7s} {row['variant']:13s} n={row['n_seeds']}  "
+            "success at the end "
             f"{row['final_success_end']:.2f} +- {row['final_success_end_se']:.2f} "
             f"(best {row['best_success_end']:.2f}; some step {row['final_success_some_step']:.2f})"
         )
     for s in result["statements"]:
-        print(f"[{s['verdict']}] {s['statement']}")
+        print(f"[{s['profile']}: {s['verdict']}; Holm: {s['verdict_holm']}] {s['statement']}")
     print(f"written: {args.out}/fig4.png, summary.csv, summary.json, statements.md")
     return 0
 

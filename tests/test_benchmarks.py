@@ -155,3 +155,12 @@ def test_launcher_benchmarks_never_start_jax_in_their_own_process():
         [sys.executable, "-c", probe], cwd=root, capture_output=True, text=True, check=False
     )
     assert done.stdout.split() == ["False", "False"], done.stderr
+
+
+def test_every_committed_results_table_equals_its_regeneration_from_records(capsys):
+    """benchmarks/regenerate.py rebuilds each table listed in REPORTS from its grid
+    records; a hand-edited table, or records changed without their table, fail here."""
+    from benchmarks import regenerate
+
+    code = regenerate.main(["--check"])
+    assert code == 0, capsys.readouterr().out

@@ -242,6 +242,32 @@ def test_report_statistics_match_a_hand_computation(tmp_path):
     assert len(summary_csv) == 4 and "statements.md" in {p.name for p in (tmp_path / "report").iterdir()}
 
 
+def test_holm_adjusts_by_hand_and_chunked_grids_report_as_one(tmp_path):
+    # Holm by hand: sorted p 0.01, 0.02, 0.04 -> 3 x 0.01, max(0.03, 2 x 0.02), max(., 1 x 0.04).
+    assert experiments.holm([0.04, 0.01, math.nan, 0.02]) == pytest.approx(
+        [0.04, 0.03, math.nan, 0.04], nan_ok=True
+    )
+    finals = {"full": [0.9, 0.8, 1.0], "no_imitation": [0.85, 0.95, 0.9]}
+    distance = {"full": [0.01, 0.02, 0.03], "no_imitation": [0.02, 0.02, 0.03]}
+    whole = _fixture_grid(tmp_path / "whole", "et", finals, distance)
+    # The same members in two chunks (seed 0; seeds 1-2), as a grid trained a seed at a time.
+    first = _fixture_grid(tmp_path / "a", "et", {k: v[:1] for k, v in finals.items()}, distance)
+    second = _fixture_grid(tmp_path / "b", "et", {k: v[1:] for k, v in finals.items()}, distance)
+    record = json.loads((second / "grid.json").read_text())
+    for m in record["members"]:  # the fixture numbers seeds from 0: this chunk is seeds 1-2
+        m["seed"] += 1
+    (second / "grid.json").write_text(json.dumps(record))
+    one = experiments.write_report([whole], tmp_path / "r1")
+    two = experiments.write_report([first, second], tmp_path / "r2")
+    pick = lambda r: [(x["variant"], x["n_seeds"], x["final_success_end"]) for x in r["summary"]]
+    assert pick(one) == pick(two) and [x["n_seeds"] for x in two["summary"]] == [3, 3]
+    assert [s["verdict_holm"] for s in one["statements"]] == [
+        s["verdict_holm"] for s in two["statements"]
+    ]
+    with pytest.raises(ValueError, match="seed 0 of et .* is in both"):
+        experiments.write_report([whole, first], tmp_path / "r3")
+
+
 def test_curves_average_seeds_at_shared_evaluations(tmp_path):
     grid = experiments.load_grid(
         _fixture_grid(tmp_path, "et", {"full": [1.0, 0.5]}, {"full": [0.0, 0.0]})
