@@ -8,6 +8,7 @@
 #   STAGES=grid BUDGET_S=560 bash benchmarks/gpu_session.sh    # the Fig. 4 grid, 3 tasks
 #   STAGES=learners BUDGET_S=560 bash benchmarks/gpu_session.sh  # DDPG, LayerNorm, td3: 5 seeds each
 #   STAGES=target BUDGET_S=560 bash benchmarks/gpu_session.sh    # handshake: minutes to 90 % from launch
+#   STAGES=paper BUDGET_S=560 bash benchmarks/gpu_session.sh     # --profile paper Fig. 4, 5 seeds
 #   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
@@ -82,6 +83,28 @@ grid() {
     --out "$OUT/fig4" 2>&1 | tee "$OUT/report.log"
 }
 
+paper() {
+  # The paper profile's Fig. 4 at the authors' budget (50 epochs of 50 cycles): per task
+  # one population of 4 variants x 5 seeds, the tasks in equal shares of what is left;
+  # then the report (statements per profile, with Holm's correction).
+  tasks=${PAPER_TASKS:-et handclap handshake}
+  n=$(echo $tasks | wc -w)
+  for task in $tasks; do
+    left=$((BUDGET_S - SECONDS))
+    minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
+    n=$((n - 1 > 0 ? n - 1 : 1))
+    echo "== paper $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+    rm -rf "/tmp/paper-$task"
+    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --profile paper \
+      --task "$task" --seeds "${PAPER_SEEDS:-5}" --no-save-replay --max-minutes "$minutes" \
+      --run-dir "/tmp/paper-$task" ${PAPER_ARGS:-} 2>&1 | tee "$OUT/paper-$task.log"
+    (cd /tmp && find "paper-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
+      | tar -cf - -T -) | tar -xf - -C "$OUT"
+  done
+  python3 -m mjx_hands.experiments report $(for t in $tasks; do echo "$OUT/paper-$t"; done) \
+    --out "$OUT/paper-fig4" 2>&1 | tee "$OUT/paper-report.log"
+}
+
 learner_flags() {  # a learner's label -> its flags (the clap's CPU grids used the same)
   case $1 in
     ddpg) echo "--algo ddpg" ;;
@@ -137,8 +160,8 @@ target() {
 
 for stage in $STAGES; do
   case $stage in
-    throughput|train|grid|learners|target) "$stage" ;;
-    *) echo "unknown stage $stage; expected throughput, train, grid, learners or target" >&2; exit 2 ;;
+    throughput|train|grid|learners|target|paper) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput, train, grid, learners, target or paper" >&2; exit 2 ;;
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"

@@ -623,7 +623,68 @@ def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
             f"{s['verdict_holm']} | {numbers} |"
         )
     (out_dir / "statements.md").write_text("\n".join(lines) + "\n")
-    return {"summary": summary, "statements": judged}
+    sides = side_by_side(summary)
+    if sides:
+        (out_dir / "profiles.json").write_text(json.dumps(sides, indent=2))
+        (out_dir / "profiles.md").write_text(side_by_side_markdown(sides))
+    return {"summary": summary, "statements": judged, "profiles": sides}
+
+
+def side_by_side(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per (task, variant) that both profiles trained: success at the end under each
+    (mean, SE, n) and Welch's p of the difference; [] when only one profile is there."""
+    rows = []
+    for r in summary:
+        if r["profile"] != "paper":
+            continue
+        other = next(
+            (
+                o
+                for o in summary
+                if o["profile"] == "project"
+                and (o["task"], o["variant"]) == (r["task"], r["variant"])
+            ),
+            None,
+        )
+        if other is None:
+            continue
+        _, p = welch(other["final_success_end_values"], r["final_success_end_values"])
+        rows.append(
+            {
+                "task": r["task"],
+                "variant": r["variant"],
+                **{
+                    f"{side}_{k}": row[k]
+                    for side, row in (("paper", r), ("project", other))
+                    for k in (
+                        "final_success_end",
+                        "final_success_end_se",
+                        "n_seeds",
+                        "final_env_steps",
+                    )
+                },
+                "p": p,
+            }
+        )
+    return rows
+
+
+def side_by_side_markdown(rows: list[dict[str, Any]]) -> str:
+    lines = [
+        "| task | variant | paper profile | project profile | difference | Welch's p |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        cells = [
+            f"{r[f'{side}_final_success_end']:.2f} ± {r[f'{side}_final_success_end_se']:.2f} "
+            f"(n={r[f'{side}_n_seeds']}, {r[f'{side}_final_env_steps'] / 1e3:.0f} k steps)"
+            for side in ("paper", "project")
+        ]
+        diff = r["project_final_success_end"] - r["paper_final_success_end"]
+        lines.append(
+            f"| {r['task']} | {r['variant']} | {cells[0]} | {cells[1]} | {diff:+.2f} | {r['p']:.3g} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 @dataclasses.dataclass(frozen=True)

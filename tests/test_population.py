@@ -268,6 +268,29 @@ def test_holm_adjusts_by_hand_and_chunked_grids_report_as_one(tmp_path):
         experiments.write_report([whole, first], tmp_path / "r3")
 
 
+def test_report_sets_the_paper_profile_beside_the_project_profile(tmp_path):
+    finals = {"full": [0.5, 0.7, 0.6], "no_imitation": [0.4, 0.5, 0.6]}
+    distance = {"full": [0.05] * 3, "no_imitation": [0.05] * 3}
+    paper = _fixture_grid(tmp_path / "paper", "et", finals, distance)
+    record = json.loads((paper / "grid.json").read_text())
+    (paper / "grid.json").write_text(json.dumps(record | {"train": {"profile": "paper"}}))
+    project = _fixture_grid(
+        tmp_path / "project", "et", {"full": [0.9, 1.0, 0.95], "no_imitation": [0.9] * 3}, distance
+    )
+    result = experiments.write_report([paper, project], tmp_path / "report")
+    assert {s["profile"] for s in result["statements"]} == {"paper", "project"}
+    rows = {r["variant"]: r for r in result["profiles"]}
+    # By hand: paper full 0.6 +- 0.1/sqrt(3), project full 0.95 +- 0.05/sqrt(3).
+    assert rows["full"]["paper_final_success_end"] == pytest.approx(0.6)
+    assert rows["full"]["project_final_success_end"] == pytest.approx(0.95)
+    from scipy import stats
+
+    expected = stats.ttest_ind([0.9, 1.0, 0.95], [0.5, 0.7, 0.6], equal_var=False).pvalue
+    assert rows["full"]["p"] == pytest.approx(expected)
+    table = (tmp_path / "report" / "profiles.md").read_text()
+    assert "| et | full | 0.60 ± 0.06 (n=3, 2 k steps) | 0.95 ± 0.03 (n=3, 2 k steps) | +0.35 |" in table
+
+
 def test_curves_average_seeds_at_shared_evaluations(tmp_path):
     grid = experiments.load_grid(
         _fixture_grid(tmp_path, "et", {"full": [1.0, 0.5]}, {"full": [0.0, 0.0]})
