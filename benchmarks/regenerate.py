@@ -55,10 +55,21 @@ REPORTS: dict[str, list[str]] = {
         "--variant",
         "no_imitation",
     ],
+    "benchmarks/paper": ["report", "benchmarks/paper/*/*/seed*"],
 }
-"""Table folder -> the experiments command that writes it (``--out`` added)."""
+"""Table folder -> the experiments command that writes it (``--out`` added); an argument
+with ``*`` stands for the record folders it matches (sorted), as a shell would expand it;
+a table whose records are not there yet is skipped."""
 
 TEXT_SUFFIXES = (".md", ".csv", ".json")
+
+
+def expand(command: list[str]) -> list[str]:
+    """``command`` with every ``*`` argument replaced by the paths it matches under ROOT."""
+    out = []
+    for arg in command:
+        out += sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(arg)) if "*" in arg else [arg]
+    return out
 
 
 def regenerate(folder: str, out: Path) -> None:
@@ -66,7 +77,7 @@ def regenerate(folder: str, out: Path) -> None:
     the command fails."""
     from mjx_hands import experiments
 
-    command = REPORTS[folder] + ["--out", str(out)]
+    command = expand(REPORTS[folder]) + ["--out", str(out)]
     printed = io.StringIO()
     with (
         contextlib.chdir(ROOT),
@@ -118,6 +129,11 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     failed = 0
     for folder in folders:
+        if any("*" in a for a in REPORTS[folder]) and expand(REPORTS[folder]) == [
+            a for a in REPORTS[folder] if "*" not in a
+        ]:
+            print(f"{folder}: no records yet")  # a glob that matches nothing
+            continue
         if args.check:
             diffs = differences(folder)
             print(f"{folder}: {'differs from its records' if diffs else 'matches its records'}")
