@@ -35,7 +35,7 @@ TASK_OPTIONS = {
     "et": ["--no-imitation"],
     "handclap": ["--imitation"],
 }
-"""Per task, the reward of its five-seed learner grids (benchmarks/RESULTS.md, "Learners")."""
+"""Per task, the reward of its five-seed learner grids (benchmarks/results/learners.md)."""
 
 
 def evaluations(metrics: Path) -> list[dict]:

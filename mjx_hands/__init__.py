@@ -12,7 +12,7 @@ import sys
 from mjx_hands import xla_flags
 
 # Before JAX starts a backend: the MJX physics step on 2 CPU cores ran 5.8x faster with
-# it at 128 envs (benchmarks/RESULTS.md, "Cost drivers by pipeline stage"; xla_flags).
+# it at 128 envs (benchmarks/results/cost_drivers.md; xla_flags).
 xla_flags.configure_cpu_codegen()
 
 

@@ -65,8 +65,8 @@ logging.getLogger("absl").addFilter(_drop_metadata_notice)
 def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp.CheckpointManager:
     options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=create)
     # Uncompressed zarr3 arrays: a CPU-preset member state (250 MB, mostly replay) saves
-    # in 0.73 s instead of 1.12 s (zstd, zarr2; median of 7 on 2 quiet cores, RESULTS.md)
-    # for 29 % more disk, which matters now that every epoch checkpoints. Older
+    # in 0.73 s instead of 1.12 s (zstd, zarr2; median of 7 on 2 quiet cores, measured
+    # when the format was chosen, no record kept) for 29 % more disk, which matters now that every epoch checkpoints. Older
     # compressed checkpoints still restore: the arrays' own metadata names their codec.
     # Saves wait until written, so Orbax's defensive copy of every host array (1.25 s of a
     # 3.4 s save of that state, profiled) is not needed.

@@ -2,8 +2,7 @@
 
 A second launch of the same program (a resumed run, the next seed, evaluating a run
 that was trained in another process) then reads its compiled programs from disk
-instead of compiling them again (``benchmarks/RESULTS.md``, "Time to the first
-epoch"). Programs with host callbacks (the native CPU physics) are never cached by
+instead of compiling them again (``benchmarks/results/first_epoch.md``). Programs with host callbacks (the native CPU physics) are never cached by
 JAX; MJX programs, on CPU and GPU, are.
 
 The commands call :func:`enable`; library use of ``mjx_hands`` leaves JAX's settings

@@ -98,7 +98,7 @@ def select_demos(demos: list, task: str, which: str) -> list:
     """``demos`` of the recordings restricted to ``which`` set (see ``EnvConfig.demos``).
 
     The authors left out, e.g., handshake rows 3-6, whose ``interaction_t`` window lies
-    in the approach, 4-5 cm short of the grip (``benchmarks/RESULTS.md``, "Fidelity").
+    in the approach, 4-5 cm short of the grip (``benchmarks/results/fidelity.md``).
     """
     if which not in DEMO_SETS:
         raise ValueError(f"unknown demonstration set {which!r}; expected one of {DEMO_SETS}")

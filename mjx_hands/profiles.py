@@ -31,7 +31,7 @@ learner        ddpg-ln, 64 envs, replay 25.6            the paper's DDPG, 50 env
 ============== ======================================== ========================================
 
 Remaining differences from the authors' code are listed, each with whether it was
-measured to matter, in ``benchmarks/RESULTS.md`` ("The paper profile").
+measured to matter, in ``benchmarks/results/paper_profile.md``.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ authors' (their environment's touch sensors and success rule):
   fingers and thumb wrap around the other hand. Following the demonstrations with a
   scripted controller never touches with the thumb's middle phalanx (0 of 64
   episodes on the recordings), but a policy trained without any thumb reward already
-  does in 34 % of its episodes (``benchmarks/RESULTS.md``, "Fidelity").
+  does in 34 % of its episodes (``benchmarks/results/fidelity.md``).
 * ``handclap``: distal or middle phalanx of each of the index, middle, ring and little
   fingers (four groups of two): flat fingers against the other's.
 * ``et``: ``ff_distal`` -- index fingertip to index fingertip.
@@ -121,7 +121,7 @@ class RewardWeights:
     states K_a = 1; the authors' code has no action term in the reward and instead
     penalises the actor by ``action_l2 = 1`` x mean squared action in its loss
     (``DDPGConfig.action_l2``, kept), so the reward adds none by default. (At 0.01, as
-    before, r_a was 5-20 % of the per-step reward: ``benchmarks/RESULTS.md``, "Fidelity".)"""
+    before, r_a was 5-20 % of the per-step reward: ``benchmarks/results/fidelity.md``.)"""
     K_pI: float = 0.5
     """Scale of the imitation-position term relative to the position weights ``ω_p``."""
     K_alphaI: float = 0.5

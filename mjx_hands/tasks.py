@@ -78,7 +78,7 @@ class TaskSpec:
     constant) and ``W_ang`` (K_alpha, per joint and radian)."""
     reward_knobs: tuple[tuple[str, float], ...] = ()
     """The knobs this task trains with where they differ from ``RewardWeights``'
-    defaults, chosen by training both sets (benchmarks/RESULTS.md, "Reward knobs")."""
+    defaults, chosen by training both sets (benchmarks/results/reward_knobs.md)."""
     authors_weights: tuple[tuple[str, AuthorsWeights], ...] = ()
     """The authors' reward configs of this task by reward (``full``: their main config,
     ``baseline1``, ``baseline2``): the paper profile's weights."""
@@ -125,8 +125,7 @@ _ET_AXES = ((-0.878, 0, 0.479), (0, -1, 0), (0.479, 0, 0.878))  # rows: HMJX, HM
 _CLAP_GROUPS = tuple((f"{f}_distal", f"{f}_middle") for f in ("ff", "mf", "rf", "lf"))
 # Required contacts, success rules, demonstration subsets and reward knobs are the
 # authors' (their configs' TOUCH_SENSORS / FORCE_GOALS, success rule, demo lists and
-# W_pos / W_f / W_ang; evidence in benchmarks/RESULTS.md, "Fidelity to the authors'
-# environment" and "Reward knobs").
+# W_pos / W_f / W_ang; evidence in benchmarks/results/fidelity.md and reward_knobs.md).
 REGISTRY = {
     "handshake": TaskSpec(
         name="handshake",

@@ -35,7 +35,7 @@ hidden layer, the option five-seed evidence picked (clap 0.95 +- 0.02 at the end
 DDPG's 0.84 +- 0.03, p = 0.03; handshake 0.84 +- 0.01 against 0.79 +- 0.07);
 ``td3`` adds TD3's clipped double Q, target smoothing and delayed actor, 3-step returns
 and LayerNorm (clap 0.91 +- 0.04), a reference: 3-step returns alone break the handshake
-(0.15 +- 0.04 at 320 k steps). Evidence: benchmarks/RESULTS.md, "Learners".
+(0.15 +- 0.04 at 320 k steps). Evidence: benchmarks/results/learners.md.
 ``--ddpg.*`` flags still override each option."""
 
 
@@ -184,7 +184,7 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
             epochs=100,  # 640 k env steps, ~45 min on 2 quiet cores (~275 env steps/s with SGD)
             eval_envs=64,
             # A 250 MB checkpoint (the replay buffer) takes ~2.4 s against a ~6.5 s epoch
-            # (native physics): every 5th epoch costs 7 %, every epoch 37 % (RESULTS.md).
+            # (native physics): every 5th epoch costs 7 %, every epoch 37 % (benchmarks/results/checkpoints.md).
             checkpoint_every=5,
             ddpg=DDPGConfig(
                 replay_capacity=200_000,

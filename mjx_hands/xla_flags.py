@@ -4,7 +4,7 @@ XLA's CPU fusion emitters (the default since jaxlib 0.5) turn MJX's batched
 forward kinematics into loop fusions that recompute each parent body's quaternion
 for every component of every descendant: one vmapped ``mjx.kinematics`` of the hand
 pair took 150 ms at 128 envs on 2 cores, against 3.3 ms with the older elemental
-emitters (``benchmarks/RESULTS.md``, "Cost drivers by pipeline stage"). The whole
+emitters (``benchmarks/results/cost_drivers.md``). The whole
 physics step ran 5.8x faster at 128 envs (the figure the README gives). The flag
 only touches CPU code generation; GPU programs are unchanged.
 

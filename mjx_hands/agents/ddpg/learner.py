@@ -107,7 +107,7 @@ class DDPGConfig:
     value_range: tuple[float, float] = (-100.0, 100.0)
     """(v_min, v_max) of the distributional critic's support: the returns it can
     represent. Fit it to the critic's returns: on the hand clap the mean Q stayed within
-    -4..+1, where this default's atoms lie 4.0 apart (benchmarks/RESULTS.md, "Learners")."""
+    -4..+1, where this default's atoms lie 4.0 apart (benchmarks/results/learners.md)."""
 
     def __post_init__(self):
         checks = {
