@@ -577,7 +577,7 @@ def plot_fig4(grids: list[dict[str, Any]], path: Path) -> None:
             ax.set_ylabel("success at the end of the episode")
         if grid_curves:
             axes[0, column].legend(loc="best", fontsize=8)
-    fig.suptitle("Evaluation success at the last step, mean +- SE over seeds")
+    fig.suptitle("Success at the last step, mean ± SE over seeds", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
