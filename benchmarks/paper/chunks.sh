@@ -4,9 +4,10 @@
 #   nohup bash benchmarks/paper/chunks.sh paper et 1 2 &       # paper profile, E.T., seeds 1, 2
 #   nohup bash benchmarks/paper/chunks.sh project handshake 0 &  # project profile beside it
 #
-# A chunk is one seed of every variant of one task (README.md here). It runs the
-# committed code (a `git archive` of HEAD, so edits to the working tree during the
-# hours a chunk takes change nothing), niced, from runs/chunks/; a finished chunk is
+# A chunk is one seed of every variant of one task (README.md here), on the authors'
+# recordings (it fails without them). It runs the committed code (a `git archive` of
+# HEAD beside the checkout, where ../shared is found as from it, so edits to the working
+# tree during the hours a chunk takes change nothing), niced; a finished chunk is
 # archived into benchmarks/paper/<profile>/<task>/seed<k>/ and named in
 # runs/chunks/status. RUNS overrides the folder of the run directories.
 set -euo pipefail
@@ -16,7 +17,7 @@ profile=$1 task=$2
 shift 2
 runs=${RUNS:-$root/runs/chunks}
 mkdir -p "$runs"
-snap=$(mktemp -d "$runs/code-XXXX")
+snap=$(mktemp -d "$root/../.mjx-hands-chunk-code-XXXX")
 git archive HEAD | tar -x -C "$snap"
 python=${PYTHON:-$root/.venv/bin/python}
 length=$([ "$task" = handshake ] && echo 20 || echo 15)  # iterations of the authors' epoch
@@ -32,7 +33,7 @@ for seed in "$@"; do
   fi
   rm -rf "${runs:?}/$name"
   if (cd "$snap" && nice -n 10 "$python" -m mjx_hands.experiments run --task "$task" \
-        --seed "$seed" --seeds 1 --no-save-replay --run-dir "$runs/$name" "${args[@]}") \
+        --seed "$seed" --seeds 1 --mocap-source optitrack --no-save-replay --run-dir "$runs/$name" "${args[@]}") \
         > "$runs/$name.log" 2>&1; then
     (cd "$snap" && "$python" -m mjx_hands.experiments archive "$runs/$name" "$dest" \
         --log "$runs/$name.log")
