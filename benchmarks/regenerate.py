@@ -93,7 +93,8 @@ def regenerate(folder: str, out: Path) -> None:
 
 def differences(folder: str) -> list[str]:
     """Unified diffs of ``folder``'s committed text files against their regeneration
-    (empty when they agree); a file missing on either side is a difference."""
+    (empty when they agree); a regenerated file that is not committed is a difference.
+    Other files in the folder (a README, the records) are not the command's."""
     with tempfile.TemporaryDirectory() as tmp:
         regenerate(folder, Path(tmp))
         fresh = {p.name: p.read_text() for p in Path(tmp).iterdir() if p.suffix in TEXT_SUFFIXES}
@@ -102,7 +103,7 @@ def differences(folder: str) -> list[str]:
         p.name: p.read_text() for p in committed_dir.iterdir() if p.suffix in TEXT_SUFFIXES
     }
     out = []
-    for name in sorted(set(fresh) | set(committed)):
+    for name in sorted(fresh):
         a, b = committed.get(name), fresh.get(name)
         if a != b:
             diff = difflib.unified_diff(
