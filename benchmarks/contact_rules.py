@@ -96,10 +96,9 @@ def main(argv: list[str] | None = None) -> dict:
         for name, close in (("follower", 0.0), ("follower_closing", args.close)):
             result = compare(env, rollout(env, args.episodes, close, args.seed))
             record["tasks"][task][name] = result
-            required = shadow_hand.CONTACT_SENSORS
             shares = ", ".join(
                 f"{n} {result['proximity']['step_share'][n]:.3f}/{result['touch']['step_share'][n]:.3f}"
-                for n in required
+                for n in shadow_hand.CONTACT_SENSORS
                 if result["proximity"]["step_share"][n] or result["touch"]["step_share"][n]
             )
             print(

@@ -59,50 +59,44 @@ train() {
   for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
 }
 
-grid() {
-  # The paper's Fig. 4 grid: per task one population of variants x seeds (one program),
-  # the tasks one after another in equal shares of what is left; then the report.
-  tasks=${GRID_TASKS:-handshake handclap et}
+grids_by_task() {
+  # Usage: grids_by_task LABEL "TASKS" REPORT_DIR [experiments run flags...]
+  # Per task one population (one program), the tasks one after another in equal shares
+  # of what is left; each grid's files but checkpoints land in $OUT; then the report.
+  label=$1 tasks=$2 report=$3
+  shift 3
   n=$(echo $tasks | wc -w)
   for task in $tasks; do
     left=$((BUDGET_S - SECONDS))
     minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
     n=$((n - 1 > 0 ? n - 1 : 1))
-    echo "== grid $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
-    rm -rf "/tmp/grid-$task"
-    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
-      --preset gpu --seeds "${GRID_SEEDS:-5}" --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
-      --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
-      --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/grid-$task" \
-      ${GRID_ARGS:-} 2>&1 | tee "$OUT/grid-$task.log"
+    echo "== $label $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
+    rm -rf "/tmp/$label-$task"
+    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" "$@" \
+      --max-minutes "$minutes" --run-dir "/tmp/$label-$task" 2>&1 | tee "$OUT/$label-$task.log"
     # Everything but checkpoints: metrics, configs, plots of every member.
-    (cd /tmp && find "grid-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
+    (cd /tmp && find "$label-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
       | tar -cf - -T -) | tar -xf - -C "$OUT"
   done
-  python3 -m mjx_hands.experiments report $(for t in $tasks; do echo "$OUT/grid-$t"; done) \
-    --out "$OUT/fig4" 2>&1 | tee "$OUT/report.log"
+  python3 -m mjx_hands.experiments report $(for t in $tasks; do echo "$OUT/$label-$t"; done) \
+    --out "$OUT/$report" 2>&1 | tee "$OUT/$report.log"
+}
+
+grid() {
+  # The paper's Fig. 4 grid with the project's setup on the GPU preset.
+  # shellcheck disable=SC2086  # GRID_ARGS holds several flags
+  grids_by_task grid "${GRID_TASKS:-handshake handclap et}" fig4 \
+    --preset gpu --seeds "${GRID_SEEDS:-5}" --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
+    --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
+    --no-save-replay --epochs 1000 ${GRID_ARGS:-}
 }
 
 paper() {
-  # The paper profile's Fig. 4 at the authors' budget (50 epochs of 50 cycles): per task
-  # one population of 4 variants x 5 seeds, the tasks in equal shares of what is left;
-  # then the report (statements per profile, with Holm's correction).
-  tasks=${PAPER_TASKS:-et handclap handshake}
-  n=$(echo $tasks | wc -w)
-  for task in $tasks; do
-    left=$((BUDGET_S - SECONDS))
-    minutes=$(python3 -c "print(max(0.5, ($left / $n - 120) / 60))")
-    n=$((n - 1 > 0 ? n - 1 : 1))
-    echo "== paper $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
-    rm -rf "/tmp/paper-$task"
-    timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --profile paper \
-      --task "$task" --seeds "${PAPER_SEEDS:-5}" --no-save-replay --max-minutes "$minutes" \
-      --run-dir "/tmp/paper-$task" ${PAPER_ARGS:-} 2>&1 | tee "$OUT/paper-$task.log"
-    (cd /tmp && find "paper-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
-      | tar -cf - -T -) | tar -xf - -C "$OUT"
-  done
-  python3 -m mjx_hands.experiments report $(for t in $tasks; do echo "$OUT/paper-$t"; done) \
-    --out "$OUT/paper-fig4" 2>&1 | tee "$OUT/paper-report.log"
+  # The paper profile's Fig. 4 at the authors' budget (50 epochs of 50 cycles): 4 variants
+  # x 5 seeds per task; the report judges the statements per profile, with Holm's correction.
+  # shellcheck disable=SC2086  # PAPER_ARGS holds several flags
+  grids_by_task paper "${PAPER_TASKS:-et handclap handshake}" paper-fig4 \
+    --profile paper --seeds "${PAPER_SEEDS:-5}" --no-save-replay ${PAPER_ARGS:-}
 }
 
 learner_flags() {  # a learner's label -> its flags (the clap's CPU grids used the same)

@@ -719,7 +719,7 @@ class HandInteractionEnv(Env):
         imitation_points = rewards.goal_positions(
             episode.target_points, episode.target_frames, p.j_min, offsets
         )
-        return {
+        features = {
             "qpos": readings.qpos,
             "qvel": readings.qvel,
             "points": readings.points,
@@ -727,10 +727,12 @@ class HandInteractionEnv(Env):
             "contacts": readings.touch
             if self.profile.contact_rule == "touch"
             else readings.contacts,
-            "target_links": data.mocap_pos[self.target_mocap[self.observed_links]],
             "imitation_points": imitation_points,
             "imitation_active": imitation_active.astype(jnp.float32),
         }
+        if self.profile.observation == "paper":  # only its observation reads them
+            features["target_links"] = data.mocap_pos[self.target_mocap[self.observed_links]]
+        return features
 
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
         if self.profile.observation == "paper":

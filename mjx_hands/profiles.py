@@ -122,7 +122,7 @@ def paper_weights(
         "K_pI": float(w_ipos),
         "K_alphaI": float(w_iang),
     }
-    given = {k: v for k, v in dataclasses.asdict(knobs or reward_params.RewardKnobs()).items()}
+    given = dataclasses.asdict(knobs or reward_params.RewardKnobs())
     values |= {k: float(v) for k, v in given.items() if v is not None}
     return reward_params.RewardWeights(
         **values,
