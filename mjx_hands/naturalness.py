@@ -39,12 +39,10 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, compile_cache, evaluate, experiments, rollouts
+from mjx_hands import checkpoint, compile_cache, evaluate, experiments, rollouts, tasks
 
 METRICS = ("dtw", "jerk", "path_ratio", "final_pose_error")
 """Per-episode metrics; lower is more natural (closer to the demonstrations) for all."""
-RATERS = {"handshake": 0.26, "handclap": 1.44, "et": 0.07}
-"""The paper's Table I: mean rating in favour of the imitation-trained policy, -2..2."""
 REFERENCES = ("demo_jerk", "demo_path_ratio")
 """The demonstrations' own jerk and path ratio over the same segments, for scale."""
 MIN_DIRECT_PATH = 0.01  # metres: shorter start-to-end distances leave path_ratio undefined
@@ -213,6 +211,7 @@ def rankings(rows: list[dict], per_policy: list[dict]) -> list[dict]:
         }
         if not all(values.values()):
             continue
+        raters = tasks.spec(task).paper_raters_score
         for metric in METRICS:
             a = [p[metric] for p in values["full"]]
             b = [p[metric] for p in values["no_imitation"]]
@@ -225,12 +224,22 @@ def rankings(rows: list[dict], per_policy: list[dict]) -> list[dict]:
                     "no_imitation": float(np.nanmean(b)),
                     "imitation_more_natural": bool(np.nanmean(a) < np.nanmean(b)),
                     "p": p_value,
-                    "raters": RATERS.get(task),
-                    "agrees_with_raters": bool(np.nanmean(a) < np.nanmean(b))
-                    == (RATERS.get(task, 0) > 0),
+                    "raters": raters,
+                    # A task the paper's raters never saw agrees with nobody.
+                    "agrees_with_raters": None
+                    if raters is None
+                    else bool(np.nanmean(a) < np.nanmean(b)) == (raters > 0),
                 }
             )
     return out
+
+
+def _signed(value: float | None) -> str:
+    return "–" if value is None else f"{value:+.2f}"
+
+
+def _yes_no(value: bool | None) -> str:
+    return "–" if value is None else ("yes" if value else "no")
 
 
 def markdown(rows: list[dict], ranks: list[dict]) -> str:
@@ -260,7 +269,7 @@ def markdown(rows: list[dict], ranks: list[dict]) -> str:
             lines.append(
                 f"| {k['task']} | {k['metric']} | {k['full']:.4g} | {k['no_imitation']:.4g} | "
                 f"{'yes' if k['imitation_more_natural'] else 'no'} | {k['p']:.3g} | "
-                f"{k['raters']:+.2f} | {'yes' if k['agrees_with_raters'] else 'no'} |"
+                f"{_signed(k['raters'])} | {_yes_no(k['agrees_with_raters'])} |"
             )
     return "\n".join(lines) + "\n"
 

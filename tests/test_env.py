@@ -405,7 +405,7 @@ def test_the_authors_demonstration_subsets_are_selected_by_row():
     path = real_data_or_skip()
     from mjx_hands import mocap, tasks
 
-    for task in tasks.TASKS:
+    for task in tasks.RELEASE_TASKS:
         demos = mocap.load_demonstrations(task, source="optitrack", path=path)
         chosen = env_lib.select_demos(demos, task, "authors")
         rows = [int(d.name.rsplit("/", 1)[-1]) for d in chosen]
