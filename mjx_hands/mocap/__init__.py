@@ -12,6 +12,11 @@ Two sources produce the same :class:`Demonstration` (host-side NumPy):
 :mod:`~mjx_hands.mocap.demonstration` (the type, checks, geometry),
 :mod:`~mjx_hands.mocap.release` (the authors' recordings) and
 :mod:`~mjx_hands.mocap.npz` (the project's files); this package re-exports their API.
+A lab's own takes come in through :mod:`~mjx_hands.mocap.takes` (BVH:
+:mod:`~mjx_hands.mocap.bvh`, Motive CSV: :mod:`~mjx_hands.mocap.motive`, mapped by
+:mod:`~mjx_hands.mocap.mapping`, converted by :mod:`~mjx_hands.mocap.capture`; the
+project's skeleton for export: :mod:`~mjx_hands.mocap.skeleton`), driven by
+``python -m mjx_hands.import_mocap``.
 
 Frames, and what the release's arrays hold as verified against the data: see
 :mod:`~mjx_hands.mocap.release`. Every position and orientation of a Demonstration is
