@@ -106,6 +106,11 @@ def paper_weights(
     for it and the config has none. ``knobs`` that are set override every variant's."""
     spec = tasks.spec(task)
     configs = dict(spec.authors_weights)
+    if not configs:
+        raise ValueError(
+            f"the paper profile needs the authors' reward configs, and the paper did not "
+            f"study {task!r}; train it with --profile project"
+        )
     if reward not in configs:
         raise ValueError(
             f"the paper profile knows rewards {', '.join(configs)} for {task}, not {reward!r}"

@@ -73,10 +73,15 @@ def contact_pose(
 
 
 def generate(
-    task: str, index: int, rng: np.random.Generator, fps: float = FPS
+    task: str,
+    index: int,
+    rng: np.random.Generator,
+    fps: float = FPS,
+    plan: tasks.SyntheticDesign | None = None,
 ) -> mocap.Demonstration:
-    """One synthetic demonstration of ``task`` (draws from ``rng``)."""
-    plan = design(task)
+    """One synthetic demonstration of ``task`` (draws from ``rng``) by ``plan`` (default:
+    the task's registered design)."""
+    plan = plan or design(task)
     actor_goal = plan.actor_posture * rng.uniform(0.85, 1.1)
     target = hand_kinematics.clip_to_range(plan.target_posture + rng.normal(0.0, 0.03, 20))
     actor_goal = hand_kinematics.clip_to_range(actor_goal)
@@ -122,11 +127,18 @@ def generate(
     )
 
 
-def generate_task(task: str, num: int = NUM_DEMOS, seed: int = SEED) -> list[mocap.Demonstration]:
-    """``num`` demonstrations of ``task``; deterministic for a given seed."""
-    key = design(task).seed_key
-    rng = np.random.default_rng([seed, tasks.name_key(task) if key is None else key])
-    return [generate(task, i, rng) for i in range(num)]
+def generate_task(
+    task: str,
+    num: int = NUM_DEMOS,
+    seed: int = SEED,
+    plan: tasks.SyntheticDesign | None = None,
+) -> list[mocap.Demonstration]:
+    """``num`` demonstrations of ``task`` by ``plan`` (default: its registered design);
+    deterministic for a given seed."""
+    plan = plan or design(task)
+    key = tasks.name_key(task) if plan.seed_key is None else plan.seed_key
+    rng = np.random.default_rng([seed, key])
+    return [generate(task, i, rng, plan=plan) for i in range(num)]
 
 
 def designed_tasks() -> tuple[str, ...]:

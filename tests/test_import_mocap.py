@@ -218,3 +218,26 @@ def test_the_exported_skeleton_mapping_parses_back_to_itself(exported):
         again = mapping_lib.parse_mapping(tomllib.loads(mapping_lib.mapping_toml(parsed)))
         assert again.actor.joints == parsed.actor.joints == skeleton.mapping(fmt, {}).actor.joints
         assert again.windows == parsed.windows
+
+
+def test_an_imported_task_is_its_takes_imported():
+    # A task without a synthetic design (the fist bump) ships takes and the npz that
+    # import_mocap makes of them; both follow from the module's generator.
+    for task in tasks.TASKS:
+        spec = tasks.spec(task)
+        folder = mocap.SYNTHETIC_PATH / task
+        if spec.synthetic is not None or spec.in_authors_release:
+            continue
+        mapping = mapping_lib.load_mapping(folder / "mapping.toml")
+        fresh = takes.import_takes(takes.take_paths(folder, mapping.format), mapping, task)
+        stored = mocap.load_synthetic(task)
+        module = __import__(f"mjx_hands.tasks.{task}", fromlist=["DESIGN"])
+        from mjx_hands import synthetic_demos
+
+        designed = synthetic_demos.generate_task(task, len(stored), plan=module.DESIGN)
+        for a, b, c in zip(stored, fresh, designed):
+            assert a.name == b.name
+            for field in ("actor_joints", "target_joints", "actor_points", "actor_palm_rot"):
+                np.testing.assert_allclose(getattr(a, field), getattr(b, field), atol=1e-6)
+                np.testing.assert_allclose(getattr(a, field), getattr(c, field), atol=1e-5)
+            assert (a.contact_begin, a.contact_end) == (c.contact_begin, c.contact_end)

@@ -245,3 +245,12 @@ def test_paper_observation_is_joints_velocities_target_links_and_touch():
             ]
         )
         np.testing.assert_allclose(obs[k], expected, atol=2e-5)
+
+
+def test_the_paper_profile_names_tasks_the_paper_did_not_study():
+    from mjx_hands import tasks
+
+    for task in tasks.TASKS:
+        if not tasks.spec(task).in_authors_release:
+            with pytest.raises(ValueError, match="paper did not study"):
+                profiles.paper_weights(task, "full", True)
