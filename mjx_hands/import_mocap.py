@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Literal
@@ -59,8 +60,14 @@ class ExportArgs:
     """Of the recordings: the rows the authors trained on, or all."""
 
 
-def report(demos: list[mocap.Demonstration], mapping: mapping_lib.Mapping, paths) -> dict:
-    """What was mapped from where, and what each take became."""
+def report(
+    demos: list[mocap.Demonstration], mapping: mapping_lib.Mapping, paths, beside: Path
+) -> dict:
+    """What was mapped from where, and what each take became (paths relative to
+    ``beside``, the folder of the npz, so that the report can be committed with it)."""
+
+    def where(path) -> str:
+        return os.path.relpath(path, beside)
 
     def hand(h: mapping_lib.HandMapping) -> dict:
         return {
@@ -76,7 +83,7 @@ def report(demos: list[mocap.Demonstration], mapping: mapping_lib.Mapping, paths
         }
 
     return {
-        "mapping": mapping.source,
+        "mapping": where(mapping.source),
         "format": mapping.format,
         "fps": mapping.fps,
         "actor": hand(mapping.actor),
@@ -87,7 +94,7 @@ def report(demos: list[mocap.Demonstration], mapping: mapping_lib.Mapping, paths
         },
         "takes": [
             {
-                "path": str(p),
+                "path": where(p),
                 "name": d.name,
                 "frames": d.num_frames,
                 "fps": d.fps,
@@ -113,7 +120,7 @@ def run_import(argv: list[str]) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     mocap.save_npz(demos, out)
-    text = json.dumps(report(demos, mapping, args.takes), indent=1)
+    text = json.dumps(report(demos, mapping, args.takes, out.parent), indent=1)
     out.with_suffix(".report.json").write_text(text + "\n")
     print(f"wrote {out} ({len(demos)} demonstrations) and {out.with_suffix('.report.json')}")
     return 0
