@@ -22,7 +22,7 @@ from mjx_hands.tasks.spec import (
     name_key,
 )
 
-MODULES = ("handshake", "handclap", "et")
+MODULES = ("handshake", "handclap", "et", "fist_bump")
 """The registered task modules, in the order of ``TASKS`` (the registry line)."""
 
 REGISTRY: dict[str, TaskSpec] = {}
