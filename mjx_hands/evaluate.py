@@ -26,10 +26,10 @@ import jax
 import tyro
 
 from mjx_hands import (
-    brax_agents,
     checkpoint,
     compile_cache,
     contact_profile,
+    learners,
     run_directory,
     train_config,
     training,
@@ -161,18 +161,20 @@ def load_policy(
     default)."""
     run_dir = Path(run_dir)
     algo_name = run_algo(run_dir)  # "ddpg" for a missing folder, which the next step names
-    if algo_name in brax_agents.ALGOS:
+    learner = learners.entry(algo_name)
+    if not learner.in_training_loop:
         if step is not None or best:
             raise ValueError(
-                f"{run_dir} was trained by Brax's {algo_name}, which keeps only its final "
-                "parameters: --step and --best choose among DDPG's checkpoints"
+                f"{run_dir} was trained by {algo_name} in its own loop, which keeps only its "
+                "final parameters: --step and --best choose among the project loop's "
+                "checkpoints"
             )
         config = train_config.config_from_json(
             train_config.read_config_json(run_dir / "config.json")
         )
         config = dataclasses.replace(config, eval_envs=eval_envs, resume=False)
         _, _, single = (env_factory or training.make_envs)(config, 1)
-        act, params = brax_agents.load_policy(run_dir, config, single)
+        act, params = learner.load_policy(run_dir, config, single)
         return LoadedPolicy(act, params, config, single, config.epochs)
     algo, single, config, ckpt_dir, step, _ = _checkpointed_learner(
         run_dir, step, eval_envs, best, env_factory

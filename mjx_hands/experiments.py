@@ -34,7 +34,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tyro
 
-from mjx_hands import cli, compile_cache, run_directory, train_cli, train_config, training
+from mjx_hands import cli, compile_cache, learners, run_directory, train_cli, train_config, training
 
 VARIANTS: dict[str, tuple[str, bool]] = {
     "full": ("full", True),
@@ -103,10 +103,10 @@ def _check_grid(grid: GridConfig) -> None:
         problems.append(f"--seeds must be positive, got {grid.seeds}")
     if base.reward != "full" or not base.imitation:
         problems.append("--reward/--no-imitation do not apply to a grid; name --variants instead")
-    if base.algo not in train_config.LEARNER_OPTIONS:
+    if base.algo in learners.REGISTRY and not learners.entry(base.algo).in_training_loop:
         problems.append(
-            f"grids train the project's learner ({', '.join(train_config.LEARNER_OPTIONS)}); "
-            f"--algo {base.algo} is not supported"
+            f"grids train the learners of the project's loop "
+            f"({', '.join(learners.loop_learners())}); --algo {base.algo} has its own loop"
         )
     if problems:
         raise ValueError("; ".join(problems))

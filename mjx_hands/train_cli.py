@@ -94,7 +94,7 @@ def reported(start: Callable[[], T]) -> tuple[T | None, int]:
 def main(argv: list[str] | None = None) -> int:
     import tyro
 
-    from mjx_hands import compile_cache, train_config, training
+    from mjx_hands import compile_cache, learners, train_config, training
 
     argv = sys.argv[1:] if argv is None else argv
 
@@ -102,11 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         default = default_config(argv)
         config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
         compile_cache.enable()
-        if config.algo in train_config.LEARNER_OPTIONS:
-            return training.run(config)
-        from mjx_hands import brax_agents
-
-        return brax_agents.run(config)
+        learner = learners.entry(config.algo)
+        return training.run(config) if learner.in_training_loop else learner.run(config)
 
     summary, code = reported(start)
     if code:

@@ -12,31 +12,10 @@ from typing import Any, Literal
 
 import jax
 
-from mjx_hands import checkpoint, profiles, reward_params, tasks
+from mjx_hands import checkpoint, learners, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
-
-LEARNER_OPTIONS: dict[str, dict[str, Any]] = {
-    "ddpg": {},
-    "ddpg-ln": {"layer_norm": True},
-    "td3": {
-        "twin_critics": True,
-        "target_policy_noise": 0.2,
-        "target_noise_clip": 0.5,
-        "actor_update_interval": 2,
-        "n_step": 3,
-        "layer_norm": True,
-    },
-}
-"""The project's own jitted learner under its names, as ``DDPGConfig`` options over a
-preset's: ``ddpg`` the paper's DDPG unchanged; ``ddpg-ln`` adds LayerNorm to every
-hidden layer, the option five-seed evidence picked (clap 0.95 +- 0.02 at the end against
-DDPG's 0.84 +- 0.03, p = 0.03; handshake 0.84 +- 0.01 against 0.79 +- 0.07);
-``td3`` adds TD3's clipped double Q, target smoothing and delayed actor, 3-step returns
-and LayerNorm (clap 0.91 +- 0.04), a reference: 3-step returns alone break the handshake
-(0.15 +- 0.04 at 320 k steps). Evidence: benchmarks/results/learners.md.
-``--ddpg.*`` flags still override each option."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,11 +54,11 @@ class TrainConfig:
     physics: Literal["auto", "mjx", "native"] = "auto"
     """Physics: MJX (accelerators), native C MuJoCo on every CPU core (>10x MJX's speed
     there) or auto (native on CPUs, MJX elsewhere)."""
-    algo: Literal["ddpg", "ddpg-ln", "td3", "sac", "ppo"] = "ddpg"
-    """Learner: the paper's DDPG; ddpg-ln, the same with LayerNorm (the evidence's pick);
-    td3, with TD3's additions and 3-step returns, a reference (its 3-step returns hurt
-    the handshake; ``LEARNER_OPTIONS``); or Brax's SAC /
-    PPO on the same environment."""
+    algo: str = "ddpg"
+    """Learner, by its name in ``mjx_hands.learners``: ddpg (the paper's DDPG), ddpg-ln
+    (the same with LayerNorm, the evidence's pick), td3 (TD3's additions and 3-step
+    returns, a reference: its 3-step returns hurt the handshake), sac or ppo (Brax's, on
+    the same environment), or a registered plug-in."""
     preset: Literal["auto", "cpu", "gpu"] = "auto"
     """Size of the run; auto picks by the device JAX finds."""
     num_envs: int = 64
@@ -142,6 +121,11 @@ class TrainConfig:
             problems.append(
                 f"--target-rotation-noise must be a finite number >= 0, got "
                 f"{self.target_rotation_noise}"
+            )
+        if self.algo not in learners.REGISTRY:
+            problems.append(
+                f"--algo {self.algo!r} is not a registered learner; expected one of "
+                f"{', '.join(learners.REGISTRY)}"
             )
         if self.task in tasks.TASKS:  # an unknown task is tyro's (or the env's) to name
             try:
@@ -226,9 +210,10 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
 
 
 def learner_config(algo: str, ddpg: DDPGConfig) -> DDPGConfig:
-    """``ddpg`` with the options of learner ``algo`` (``LEARNER_OPTIONS``; Brax's SAC/PPO
-    read only its sizes and leave it as it is)."""
-    return dataclasses.replace(ddpg, **LEARNER_OPTIONS.get(algo, {}))
+    """``ddpg`` with the options of learner ``algo`` (its ``LearnerEntry.ddpg_options``:
+    DDPG's variants; Brax's SAC/PPO read only its sizes and leave it as it is)."""
+    options = learners.REGISTRY[algo].ddpg_options if algo in learners.REGISTRY else {}
+    return dataclasses.replace(ddpg, **options)
 
 
 def read_config_json(path: Path) -> dict[str, Any]:
@@ -341,10 +326,10 @@ def check_population(configs: list[TrainConfig]) -> None:
     dirs = [str(run_dir_path(c)) for c in configs]
     if len(set(dirs)) != len(dirs):
         raise ValueError(f"members need distinct run directories, got {dirs}")
-    if any(c.algo not in LEARNER_OPTIONS for c in configs):
+    if any(not learners.entry(c.algo).in_training_loop for c in configs):
         raise ValueError(
-            f"training.run trains {' and '.join(LEARNER_OPTIONS)}; --algo {configs[0].algo} "
-            "runs through mjx_hands.brax_agents.run (train.py dispatches by --algo)"
+            f"training.run trains {', '.join(learners.loop_learners())}; --algo "
+            f"{configs[0].algo} has its own loop (train.py dispatches by --algo)"
         )
 
 

@@ -21,8 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from mjx_hands import checkpoint
-from mjx_hands.agents.ddpg import DDPG
+from mjx_hands import checkpoint, learners
 from mjx_hands.run_directory import RunDirectory
 from mjx_hands.train_config import TrainConfig, check_population, program_config
 
@@ -65,8 +64,9 @@ def make_envs(config: TrainConfig, num_devices: int):
 
 def make_learner(
     config: TrainConfig, devices=None, env_factory=None, population: list | None = None
-) -> tuple[DDPG, Any]:
-    """The DDPG learner of ``config`` and its single (unbatched) environment.
+) -> tuple[learners.Learner, Any]:
+    """The learner of ``config`` (its registered ``build``, e.g. DDPG) and its single
+    (unbatched) environment.
 
     ``env_factory(config, num_devices) -> (train_env, eval_env, single_env)`` replaces
     the hand environment (tests train the point-reach task through the same loop).
@@ -88,16 +88,16 @@ def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
     config = members[0]
     num_devices = len(devices or jax.local_devices())  # this host's share of the batch
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
-    algo = DDPG(
-        train_env,
-        config.ddpg,
-        episode_length=single.episode_length,
+    setup = learners.LearnerSetup(
+        config=config,
+        train_env=train_env,
         eval_env=eval_env,
+        single=single,
         devices=list(devices) if devices else None,
         members=len(members),
         member_info=member_variants(single, list(members)),
     )
-    return algo, single
+    return learners.entry(config.algo).build(setup), single
 
 
 # ----------------------------------------------------------------- run
@@ -282,6 +282,8 @@ def run_population(
             t0 = time.perf_counter()
             state, metrics = algo.run_epoch(state)
             seconds = time.perf_counter() - t0
+            if epoch == start_epoch + 1:
+                learners.check_epoch_metrics(config.algo, metrics[0])
             diverged.update(_newly_diverged(epoch, metrics, runs, diverged))
             if len(diverged) == len(runs):
                 raise TrainingDiverged(f"epoch {epoch}: every member of the population diverged")

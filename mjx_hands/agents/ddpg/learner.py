@@ -34,10 +34,16 @@ import numpy as np
 import optax
 from flax import struct
 
-from mjx_hands import checkpoint, contract
+from mjx_hands import checkpoint
 from mjx_hands.agents.ddpg import losses, networks, replay
-
-AXIS = "devices"
+from mjx_hands.agents.population import (
+    AXIS,
+    Population,
+    first_device,
+    member,
+    per_member,
+    stack_members,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,30 +196,6 @@ class TrainerState:
     env_steps: jax.Array  # (devices, members) int32, each device's environment steps so far
 
 
-def member(tree, index: int):
-    """Member ``index`` of a population pytree (leaves (devices, members, ...)) ->
-    leaves (devices, ...); also for abstract (``jax.eval_shape``) trees."""
-
-    def take(x):
-        if isinstance(x, jax.ShapeDtypeStruct):
-            return jax.ShapeDtypeStruct(x.shape[:1] + x.shape[2:], x.dtype)
-        return x[:, index]
-
-    return jax.tree.map(take, tree)
-
-
-def stack_members(trees: list):
-    """Inverse of :func:`member`: trees with leaves (devices, ...) -> (devices, members, ...)."""
-    return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs], axis=1), *trees)
-
-
-def _first_device(x):
-    """Device 0's slice of a replicated leaf; also for abstract (eval_shape) leaves."""
-    if isinstance(x, jax.ShapeDtypeStruct):
-        return jax.ShapeDtypeStruct(x.shape[1:], x.dtype)
-    return x[0]
-
-
 class DDPG:
     """DDPG on a batched Brax-API environment (see ``mjx_hands.env.BatchedEnv``), for a
     population of ``members`` independent runs trained together in one compiled epoch.
@@ -248,25 +230,22 @@ class DDPG:
         members: int = 1,
         member_info: dict[str, Any] | None = None,
     ):
+        self.population = Population(
+            env,
+            episode_length=episode_length,
+            eval_env=eval_env,
+            members=members,
+            member_info=member_info,
+            devices=devices,
+        )
         self.env = env
-        self.eval_env = eval_env or env
+        self.eval_env = self.population.eval_env
         self.config = config
         self.episode_length = episode_length
-        if members < 1:
-            raise ValueError(f"a population needs at least one member, got members={members}")
         self.members = members
-        for key, value in (member_info or {}).items():
-            for leaf in jax.tree.leaves(value):
-                if np.shape(leaf)[:1] != (members,):
-                    raise ValueError(
-                        f"member_info[{key!r}] has a leaf of shape {np.shape(leaf)}; expected a "
-                        f"leading axis of the {members} members"
-                    )
         self.member_info = member_info
-        # devices=None: every device of every host (multi-host); else exactly these.
-        self._pmap_devices = devices
-        self.devices = devices or jax.local_devices()
-        self.num_devices = len(self.devices)
+        self.devices = self.population.devices
+        self.num_devices = self.population.num_devices
         for name in ("batch_size", "replay_capacity", "min_replay_size"):
             if getattr(config, name) % self.num_devices:
                 raise ValueError(
@@ -285,13 +264,10 @@ class DDPG:
         self.critic_opt = optax.adam(config.critic_learning_rate)
         self.trace_count = 0
         """How often the epoch function was traced (1 after any number of epochs)."""
-        pmap = functools.partial(jax.pmap, axis_name=AXIS, devices=self._pmap_devices)
-        self._init = pmap(self._init_device)
-        self._epoch = pmap(self._epoch_device, donate_argnums=0)
-        self._evaluate = pmap(self._evaluate_device)
-        # Host arrays with a leading device axis -> one shard per device, laid out exactly
-        # as the epoch's outputs (same mesh axis name), so jit sees no new input sharding.
-        self.to_devices = pmap(lambda tree: tree)
+        self._init = self.population.pmap(self._init_device)
+        self._epoch = self.population.pmap(self._epoch_device, donate_argnums=0)
+        self._evaluate = self.population.evaluation(self.policy)
+        self.to_devices = self.population.to_devices
 
     # ------------------------------------------------------------- networks
     def normalize(self, learner: LearnerState, obs: jax.Array) -> jax.Array:
@@ -325,34 +301,6 @@ class DDPG:
         pick = jax.random.uniform(k_pick, action.shape[:-1] + (1,)) < self.config.random_action_prob
         return jnp.where(pick, random, action)
 
-    # ---------------------------------------------------------- environments
-    def _reset_members(self, env, keys: jax.Array):
-        """Each member's batch of fresh episodes: keys (members, 2) -> leaves (members, n, ...)."""
-        state = jax.vmap(env.reset)(keys)
-        if self.member_info is None:
-            return state
-        info = dict(state.info)
-        for key, value in self.member_info.items():
-            info[key] = jax.tree.map(
-                lambda mine, like: jnp.broadcast_to(
-                    jnp.asarray(mine, like.dtype)[:, None], like.shape
-                ),
-                value,
-                state.info[key],
-            )
-        return state.replace(info=info)
-
-    @staticmethod
-    def _step_members(env, state, action: jax.Array):
-        """Step every member's environments as one batch (one physics call).
-
-        state leaves (members, n, ...), action (members, n, act) -> next state, same layout.
-        """
-        members, n = action.shape[:2]
-        flat = jax.tree.map(lambda x: x.reshape((members * n,) + x.shape[2:]), state)
-        stepped = env.step(flat, action.reshape((members * n,) + action.shape[2:]))
-        return jax.tree.map(lambda x: x.reshape((members, n) + x.shape[1:]), stepped)
-
     # ------------------------------------------------------------------ init
     @functools.cached_property
     def state_shapes(self) -> TrainerState:
@@ -370,7 +318,7 @@ class DDPG:
         abstract (``jax.eval_shape``) states, as the structure to restore into."""
         one = member(state, index)
         tree = {
-            "learner": jax.tree.map(_first_device, one.learner),
+            "learner": jax.tree.map(first_device, one.learner),
             "env_state": one.env_state,
             "stats": one.stats,
             "rng": one.rng,
@@ -383,7 +331,7 @@ class DDPG:
     def policy_tree(self, state: TrainerState, index: int = 0) -> dict[str, Any]:
         """What a policy needs (the learner: networks, targets, normaliser); no env or
         buffer."""
-        return {"learner": jax.tree.map(_first_device, member(state, index).learner)}
+        return {"learner": jax.tree.map(first_device, member(state, index).learner)}
 
     def load_policy(self, ckpt_dir, step: int, verified: bool = False):
         """(act, learner, epoch) of the policy a checkpoint folder (a run's ``checkpoints``
@@ -425,15 +373,7 @@ class DDPG:
     def init(self, rng: jax.Array) -> TrainerState:
         """A fresh trainer state from one key per member: rng (members, 2), or (2,) for a
         population of one. Leaves get the leading axes (devices, members)."""
-        rng = jnp.asarray(rng)
-        if rng.ndim == 1:
-            rng = rng[None]
-        if rng.shape[0] != self.members:
-            raise ValueError(f"init needs one key per member ({self.members}), got {rng.shape}")
-        # Distinct envs on every host; then one key per device, as a run alone splits them.
-        rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
-        keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
-        return self._init(jnp.swapaxes(keys, 0, 1))
+        return self._init(self.population.device_keys(rng, "init"))
 
     def _init_learner(self, shared: jax.Array) -> LearnerState:
         k_actor, k_critic = jax.random.split(shared)
@@ -464,7 +404,7 @@ class DDPG:
         learner = jax.vmap(lambda k: self._init_learner(jax.random.fold_in(k, 0)))(shared)
         keys = jax.vmap(jax.random.split)(rng)
         rng, k_env = keys[:, 0], keys[:, 1]
-        env_state = self._reset_members(self.env, k_env)
+        env_state = self.population.reset(self.env, k_env)
         example = replay.Transition(
             obs=env_state.obs[0, 0],
             action=jnp.zeros(self.env.action_size),
@@ -485,7 +425,7 @@ class DDPG:
         """One compiled epoch; ``state`` is donated. Returns the new state and each
         member's host metrics."""
         state, metrics = self._epoch(state)
-        return state, _per_member(metrics, self.members)
+        return state, per_member(metrics, self.members)
 
     def _epoch_device(self, state: TrainerState):
         self.trace_count += 1  # runs only while tracing: counts compilations
@@ -570,7 +510,7 @@ class DDPG:
         carry and of the outputs have leading axes (members, envs)."""
         env_state, stats = carry
         action = jax.vmap(self._explore)(learner, env_state.obs, rng)
-        next_state = self._step_members(self.env, env_state, action)
+        next_state = self.population.step(self.env, env_state, action)
         done, truncation = next_state.done, next_state.info["truncation"]
         transition = replay.Transition(
             obs=env_state.obs,
@@ -745,35 +685,7 @@ class DDPG:
 
     def evaluate_learner(self, learner: LearnerState, rng: jax.Array) -> list[dict[str, float]]:
         """:meth:`evaluate` of a replicated population learner (leaves (devices, members, ...))."""
-        rng = jnp.asarray(rng)
-        if rng.ndim == 1:
-            rng = rng[None]
-        if rng.shape[0] != self.members:
-            raise ValueError(f"evaluate needs one key per member ({self.members}), got {rng.shape}")
-        rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
-        keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
-        metrics = self._evaluate(learner, jnp.swapaxes(keys, 0, 1))
-        return _per_member(metrics, self.members)
-
-    def _evaluate_device(self, learner: LearnerState, rng: jax.Array):
-        env = self.eval_env
-
-        def step(env_state, _):
-            action = jax.vmap(self.policy)(learner, env_state.obs)
-            next_state = self._step_members(env, env_state, action)
-            return next_state, (next_state.reward, next_state.info["success"])
-
-        start = self._reset_members(env, rng)
-        final, (reward, success) = jax.lax.scan(step, start, None, length=self.episode_length)
-        # reward, success: (steps, members, envs)
-        metrics = contract.evaluation_metrics(reward, success, final.metrics)
-        return jax.lax.pmean(metrics, AXIS)
-
-
-def _per_member(metrics: dict[str, jax.Array], members: int) -> list[dict[str, float]]:
-    """Device 0's (members,) metrics -> one dict of floats per member."""
-    host = {k: np.asarray(v[0]) for k, v in jax.device_get(metrics).items()}
-    return [{k: float(v[i]) for k, v in host.items()} for i in range(members)]
+        return self._evaluate(learner, rng)
 
 
 def _all_finite(tree) -> jax.Array:
