@@ -117,10 +117,10 @@ def variant_model(env: env_lib.HandInteractionEnv, change) -> mjx.Model:
 
 def training_states(run_dir: Path) -> tuple[env_lib.HandInteractionEnv, mjx.Data]:
     """The single env of a run and its batch of env states at the last checkpoint."""
-    from mjx_hands import checkpoint, evaluate
+    from mjx_hands import checkpoint, policies
 
     try:
-        _, tree, _, single = evaluate.restore_run(run_dir)
+        _, tree, _, single = policies.restore_run(run_dir)
     except checkpoint.CheckpointError as err:
         raise SystemExit(f"error: {err}") from err
     # (devices, envs per device, ...) -> (envs, ...)

@@ -35,6 +35,8 @@ import numpy as np
 import tyro
 
 from mjx_hands import cli, compile_cache, learners, run_directory, train_cli, train_config, training
+from mjx_hands.grids import GRID_FILE, HEADLINE, load_grid, read_rows
+from mjx_hands.statistics import ALPHA, holm, mean_se, welch
 
 VARIANTS: dict[str, tuple[str, bool]] = {
     "full": ("full", True),
@@ -52,9 +54,6 @@ contact term -- both without imitation, as the authors' baseline configs."""
 
 Variant = Literal[tuple(VARIANTS)]
 FIG4_VARIANTS = ("full", "baseline1", "baseline2", "no_imitation")
-GRID_FILE = "grid.json"
-HEADLINE = "eval/success_final"  # the authors' metric: required contacts at the last step
-ALPHA = 0.05  # two-sided significance level of the statements' tests
 HIGH_SUCCESS = 0.8  # "a high success rate" (statement 3)
 
 
@@ -207,57 +206,6 @@ def run_main(argv: list[str]) -> int:
 
 
 # ---------------------------------------------------------------------- report
-def mean_se(values) -> tuple[float, float]:
-    """Mean and standard error (sample std / sqrt(n); 0 for one value) of the finite values."""
-    x = np.asarray([v for v in values if math.isfinite(v)], float)
-    if x.size == 0:
-        return math.nan, math.nan
-    se = float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
-    return float(x.mean()), se
-
-
-def welch(a, b) -> tuple[float, float]:
-    """Welch's two-sided t-test of mean(a) != mean(b): (t, p). Samples without spread
-    compare exactly: p = 1 when the means are equal, else 0."""
-    from scipy import stats
-
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
-    if len(a) < 2 or len(b) < 2:
-        return math.nan, math.nan
-    if a.std() == 0 and b.std() == 0:
-        same = a.mean() == b.mean()
-        return (0.0, 1.0) if same else (math.copysign(math.inf, a.mean() - b.mean()), 0.0)
-    result = stats.ttest_ind(a, b, equal_var=False)
-    return float(result.statistic), float(result.pvalue)
-
-
-def _read_rows(path: Path) -> list[dict[str, float]]:
-    with path.open() as f:
-        return [
-            {k: float(v) for k, v in r.items() if k is not None and v not in ("", None)}
-            for r in csv.DictReader(f)
-        ]
-
-
-def load_grid(grid_dir: Path) -> dict[str, Any]:
-    """A grid's record and each member's evaluation rows:
-    ``{'task', 'dir', 'members': [{'variant', 'seed', 'evals': [row, ...]}]}``."""
-    path = Path(grid_dir) / GRID_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{grid_dir} is not an experiment grid ({GRID_FILE} missing)")
-    record = json.loads(path.read_text())
-    loaded = []
-    for m in record["members"]:
-        metrics = Path(grid_dir) / m["run_dir"] / "metrics.csv"
-        rows = _read_rows(metrics) if metrics.is_file() else []
-        loaded.append(m | {"evals": [r for r in rows if HEADLINE in r]})
-    profile = record.get("train", {}).get("profile", "project")
-    for m in loaded:
-        m["source"] = str(grid_dir)
-    return {"task": record["task"], "profile": profile, "dir": str(grid_dir), "members": loaded}
-
-
 def merge_grids(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Grids of one task and profile as one (e.g. a grid trained in chunks of seeds), in
     first-seen order; a (variant, seed) that two of them hold is an error naming both."""
@@ -361,19 +309,6 @@ def summarize(grids: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def _lookup(summary: list[dict[str, Any]], task: str, variant: str) -> dict[str, Any] | None:
     """``summary``'s row of (task, variant); ``summary`` holds one profile."""
     return next((r for r in summary if r["task"] == task and r["variant"] == variant), None)
-
-
-def holm(p_values: list[float]) -> list[float]:
-    """Holm-Bonferroni adjusted p-values (same order; NaN stays NaN): the family-wise
-    error over all of the statements' tests stays below ``ALPHA`` when each adjusted p is
-    compared with it."""
-    finite = sorted((p, i) for i, p in enumerate(p_values) if math.isfinite(p))
-    adjusted = [math.nan] * len(p_values)
-    running = 0.0
-    for rank, (p, i) in enumerate(finite):
-        running = max(running, min(1.0, (len(finite) - rank) * p))
-        adjusted[i] = running
-    return adjusted
 
 
 def _corrected(judged: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -749,7 +684,7 @@ def seed_record(evals: list[dict[str, float]], first_epoch_seconds: float) -> di
 
 def _first_epoch_seconds(grid_dir: Path, member: dict[str, Any]) -> float:
     """Wall seconds from launch to the end of epoch 1 (building and compiles included)."""
-    rows = _read_rows(Path(grid_dir) / member["run_dir"] / "metrics.csv")
+    rows = read_rows(Path(grid_dir) / member["run_dir"] / "metrics.csv")
     first = next((r for r in rows if r.get("epoch") == 1.0), None)
     return first.get("time/wall_seconds", math.nan) if first else math.nan
 

@@ -39,7 +39,7 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, compile_cache, evaluate, experiments, rollouts, tasks
+from mjx_hands import checkpoint, compile_cache, grids, policies, rollouts, statistics, tasks
 
 METRICS = ("dtw", "jerk", "path_ratio", "final_pose_error")
 """Per-episode metrics; lower is more natural (closer to the demonstrations) for all."""
@@ -169,8 +169,8 @@ def expand(paths: tuple[str, ...], variants: tuple[str, ...]) -> list[dict]:
     ``variants`` (label: the variant), run folders themselves (label: the folder name)."""
     out = []
     for path in map(Path, paths):
-        if (path / experiments.GRID_FILE).is_file():
-            grid = json.loads((path / experiments.GRID_FILE).read_text())
+        if (path / grids.GRID_FILE).is_file():
+            grid = json.loads((path / grids.GRID_FILE).read_text())
             members = [m for m in grid["members"] if m["variant"] in variants]
             if not members:
                 raise ValueError(
@@ -195,7 +195,7 @@ def table(per_policy: list[dict]) -> list[dict]:
         group = [p for p in per_policy if (p["task"], p["label"]) == key]
         row = {"task": key[0], "label": key[1], "n": len(group)}
         for metric in (*METRICS, *REFERENCES):
-            row[metric], row[f"{metric}_se"] = experiments.mean_se([g[metric] for g in group])
+            row[metric], row[f"{metric}_se"] = statistics.mean_se([g[metric] for g in group])
         rows.append(row)
     return rows
 
@@ -215,7 +215,7 @@ def rankings(rows: list[dict], per_policy: list[dict]) -> list[dict]:
         for metric in METRICS:
             a = [p[metric] for p in values["full"]]
             b = [p[metric] for p in values["no_imitation"]]
-            _, p_value = experiments.welch(a, b)
+            _, p_value = statistics.welch(a, b)
             out.append(
                 {
                     "task": task,
@@ -282,14 +282,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.episodes < 1:
             raise ValueError(f"--episodes {args.episodes} must be positive")
-        policies = expand(args.runs, args.variants)
+        runs = expand(args.runs, args.variants)
     except (ValueError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     per_policy = []
-    for entry in policies:
+    for entry in runs:
         try:
-            loaded = evaluate.load_policy(entry["run_dir"], eval_envs=args.episodes, best=args.best)
+            loaded = policies.load_policy(entry["run_dir"], eval_envs=args.episodes, best=args.best)
         except (checkpoint.CheckpointError, ValueError, FileNotFoundError) as err:
             print(f"error: {entry['run_dir']}: {err}", file=sys.stderr)
             return 2

@@ -36,7 +36,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, compile_cache, evaluate, rollouts
+from mjx_hands import checkpoint, compile_cache, policies, rollouts
 from mjx_hands import env as env_lib
 
 ORIENTATION_FILE = "robustness_orientation"
@@ -285,7 +285,7 @@ def load_runs(args: RobustnessArgs) -> list[tuple]:
     """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
     loaded = []
     for run_dir in args.run_dirs:
-        policy = evaluate.load_policy(Path(run_dir), eval_envs=args.chunk, best=args.best)
+        policy = policies.load_policy(Path(run_dir), eval_envs=args.chunk, best=args.best)
         loaded.append((run_dir, policy.act, policy.single, policy.epoch))
     tasks = {single.config.task for _, _, single, _ in loaded}
     if len(tasks) > 1:

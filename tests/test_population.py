@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import tiny
 
-from mjx_hands import experiments, train_config, training
+from mjx_hands import experiments, statistics, train_config, training
 from mjx_hands.agents.ddpg import DDPG, DDPGConfig, member
 from mjx_hands.point_reach import PointReach, make_point_reach
 
@@ -328,7 +328,7 @@ def test_compare_learners_from_grids(tmp_path, capsys):
     # Seeds 1 and 2 first evaluate 0.1 and 0.2 (< 0.8): no fall counted before 0.8.
     assert rows[0]["worst_collapse"] == 0.0
     # Welch's p of td3's finals against the baseline's (same spread, means 0.6 vs 0.9).
-    assert rows[1]["p_final_vs_first"] == pytest.approx(experiments.welch([0.5, 0.7, 0.6], [0.9, 0.8, 1.0])[1])
+    assert rows[1]["p_final_vs_first"] == pytest.approx(statistics.welch([0.5, 0.7, 0.6], [0.9, 0.8, 1.0])[1])
     assert (tmp_path / "cmp" / "learners.png").stat().st_size > 5000
     assert "| td3 | 3 | 0.60 ± 0.06 |" in (tmp_path / "cmp" / "learners.md").read_text()
     assert experiments.main(["compare", str(paper)]) == 2

@@ -421,15 +421,15 @@ def test_evaluate_reloads_the_policy_and_renders_a_video(hand_run):
 
 
 def test_evaluate_loads_the_best_policy_without_compiling(hand_run):
-    from mjx_hands import evaluate
+    from mjx_hands import policies
 
     run_dir, result = hand_run
     assert result.returncode == 0
     with open(run_dir / "metrics.csv") as f:
         rows = [r for r in csv.DictReader(f)]
-    best_policy = evaluate.load_policy(run_dir, best=True, eval_envs=8)
+    best_policy = policies.load_policy(run_dir, best=True, eval_envs=8)
     best, epoch = best_policy.params, best_policy.epoch
-    latest_policy = evaluate.load_policy(run_dir, eval_envs=8)
+    latest_policy = policies.load_policy(run_dir, eval_envs=8)
     latest = latest_policy.params
     assert int(best.updates) == float(rows[epoch - 1]["train/updates"])
     if epoch == 2:  # the best is the latest: the very same networks
@@ -565,16 +565,16 @@ def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
     assert len(rows) >= 3 and "eval/episode_reward" in rows[0]
     # Loaded back by its own learner (networks rebuilt, not Brax's inference function
     # from training): the same episodes give the training's final evaluation exactly.
-    from mjx_hands import evaluate, rollouts
+    from mjx_hands import policies, rollouts
 
-    loaded = evaluate.load_policy(run_dir, eval_envs=config.eval_envs, env_factory=point_factory)
+    loaded = policies.load_policy(run_dir, eval_envs=config.eval_envs, env_factory=point_factory)
     assert loaded.config.algo == algo and loaded.epoch == config.epochs
     keys = rollouts.episode_keys(config.seed + 1, config.eval_envs)
     trajectory = rollouts.rollout(loaded.single, loaded.act, keys)
     metrics, _ = rollouts.summarize(loaded.single, trajectory)
     assert metrics == pytest.approx(summary["final_eval"], rel=1e-6)
     with pytest.raises(ValueError, match="keeps only its final parameters"):
-        evaluate.load_policy(run_dir, best=True, env_factory=point_factory)
+        policies.load_policy(run_dir, best=True, env_factory=point_factory)
 
 
 def test_checkpoint_round_trips_empty_and_nested_arrays(tmp_path):

@@ -26,7 +26,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, compile_cache, evaluate, rollouts
+from mjx_hands import checkpoint, compile_cache, policies, render, rollouts
 from mjx_hands import env as env_lib
 from mjx_hands.study import layout
 
@@ -103,7 +103,7 @@ def make(args: MakeArgs, log=None) -> layout.Study:
     for index in range(0, len(args.runs), 2):
         loaded = {}
         for policy_name, run_dir in zip(layout.POLICIES, args.runs[index : index + 2]):
-            policy = evaluate.load_policy(Path(run_dir), eval_envs=1, best=args.best)
+            policy = policies.load_policy(Path(run_dir), eval_envs=1, best=args.best)
             loaded[policy_name] = (policy.config, policy.single, policy.act)
         tasks = {config.task for config, _, _ in loaded.values()}
         if len(tasks) > 1:
@@ -134,8 +134,8 @@ def make(args: MakeArgs, log=None) -> layout.Study:
         sides = {"left": left, "right": next(p for p in layout.POLICIES if p != left)}
         for side, policy_name in sides.items():
             single, trajectory = rendered[policy_name]
-            shown = {k: trajectory[k][:, episode : episode + 1] for k in evaluate.VIDEO_KEYS}
-            evaluate.render_video(
+            shown = {k: trajectory[k][:, episode : episode + 1] for k in render.VIDEO_KEYS}
+            render.render_video(
                 single,
                 shown,
                 out / layout.video_path(pid, side),
