@@ -172,7 +172,7 @@ def measure(env, step, data: mjx.Data, actions: jax.Array, native_qpos=None) -> 
     """Physics steps/s over ``actions`` (T, B, 24) from ``data`` (B envs), plus stats and,
     given native MuJoCo's final qpos (B, nq) from the same starts, the gaps to it."""
     stats = state_stats(jax.block_until_ready(step(data, actions[0])))
-    _, seconds = throughput._time_loop(step, data, actions)
+    _, seconds = throughput.time_loop(step, data, actions)
     n = actions.shape[0] * actions.shape[1] * env.n_substeps
     row = {"physics_steps_per_s": n / seconds} | stats
     if native_qpos is not None:

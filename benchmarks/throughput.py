@@ -31,7 +31,7 @@ from mjx_hands import env as env_lib
 from mjx_hands import physics
 
 
-def _time_loop(step, carry, actions):
+def time_loop(step, carry, actions):
     """Seconds for ``carry = step(carry, a)`` over ``actions`` after one warm-up call."""
     carry = jax.block_until_ready(step(carry, actions[0]))
     t0 = time.perf_counter()
@@ -97,7 +97,7 @@ def measure_mjx(
     t0 = time.perf_counter()
     physics_c = physics_batch.lower(starts, actions[0]).compile()
     compile_s["physics"] = time.perf_counter() - t0
-    data, t_physics = _time_loop(physics_c, starts, actions)
+    data, t_physics = time_loop(physics_c, starts, actions)
     # Untimed: the exact sequence native MuJoCo runs (the timed loop repeats action 0).
     final = starts
     for a in actions:
@@ -114,7 +114,7 @@ def measure_mjx(
         t0 = time.perf_counter()
         step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
         result["compile_s"]["env_step"] = time.perf_counter() - t0
-        s, t_env = _time_loop(step_c, state, actions)
+        s, t_env = time_loop(step_c, state, actions)
         result["env_control_steps_per_s"] = n / t_env
         result["env_physics_steps_per_s"] = n * env.n_substeps / t_env
         result["finite"] &= bool(np.all(np.isfinite(np.asarray(s.obs))))
@@ -138,7 +138,7 @@ def measure_native_env(
     t0 = time.perf_counter()
     step_c = jax.jit(benv.step).lower(state, actions[0]).compile()
     compile_s["env_step"] = time.perf_counter() - t0
-    s, t_env = _time_loop(step_c, state, actions)
+    s, t_env = time_loop(step_c, state, actions)
     n = batch * actions.shape[0]
     return {
         "env_control_steps_per_s": n / t_env,

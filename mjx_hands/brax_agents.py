@@ -141,19 +141,18 @@ def _deterministic_apply(make_policy, params, obs):
     return make_policy(params, deterministic=True)(obs, jax.random.PRNGKey(0))[0]
 
 
-def run(config, out=None, env_factory=None) -> dict[str, Any]:
+def run(config, services) -> dict[str, Any]:
     """Train Brax's SAC or PPO (``config.algo``) on the task; the run directory holds
     config.json, metrics.csv, success.png and the parameters (no checkpoint to resume).
 
-    ``env_factory``: see :func:`mjx_hands.training.make_learner`.
+    ``services``: the project loop's run folder, environments and logs
+    (``learners.RunServices``; ``training.run_services`` makes them).
     """
     from brax.io import model as brax_model
     from brax.training.agents.ppo import train as ppo
     from brax.training.agents.sac import train as sac
 
-    from mjx_hands import run_directory, train_config, training
-
-    run_dir = train_config.run_dir_path(config)
+    run_dir, out = services.run_dir, services.out
     if config.algo not in ALGOS:
         raise ValueError(f"brax_agents.run trains sac or ppo, not {config.algo!r}")
     if config.resume:
@@ -166,14 +165,14 @@ def run(config, out=None, env_factory=None) -> dict[str, Any]:
             f"{run_dir} already holds a run; choose another --run-dir for --algo {config.algo}"
         )
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(json.dumps(train_config.config_to_json(config), indent=2))
-    _, _, single = (env_factory or training.make_envs)(config, 1)
+    (run_dir / "config.json").write_text(json.dumps(services.config_json, indent=2))
+    _, _, single = services.make_envs(config, 1)
     episode_length = single.episode_length
     ddpg = config.ddpg
     num_timesteps = config.epochs * config.num_envs * ddpg.unroll_length * ddpg.iterations_per_epoch
     num_evals = max(2, config.epochs // config.eval_every + 1)
     gamma = ddpg.discount if ddpg.discount is not None else 1.0 - 1.0 / episode_length
-    log = run_directory.MetricsLog(run_dir)
+    log = services.metrics_log(run_dir)
     started = time.perf_counter()
 
     def progress(steps: int, metrics: dict[str, Any]) -> None:
@@ -233,7 +232,7 @@ def run(config, out=None, env_factory=None) -> dict[str, Any]:
     final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()
-    run_directory.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
+    services.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
     print(
         f"{config.algo}: success at the end {final['eval/success_final']:.2f} "
         f"(some step {final['eval/success']:.2f})",

@@ -17,19 +17,15 @@ that reads them back.
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
 import sys
 from pathlib import Path
 from typing import Annotated, Literal
 
-import numpy as np
 import tyro
 
 from mjx_hands import cli, mocap, tasks
 from mjx_hands.mocap import mapping as mapping_lib
 from mjx_hands.mocap import takes
-from mjx_hands.shadow_hand import HAND_JOINTS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,54 +56,6 @@ class ExportArgs:
     """Of the recordings: the rows the authors trained on, or all."""
 
 
-def report(
-    demos: list[mocap.Demonstration], mapping: mapping_lib.Mapping, paths, beside: Path
-) -> dict:
-    """What was mapped from where, and what each take became (paths relative to
-    ``beside``, the folder of the npz, so that the report can be committed with it)."""
-
-    def where(path) -> str:
-        return os.path.relpath(path, beside)
-
-    def hand(h: mapping_lib.HandMapping) -> dict:
-        return {
-            "palm": h.palm,
-            "joints": {
-                j: (
-                    f"{s.node}.{s.axis} x {s.sign:g} + {s.offset:g}"
-                    if s.node
-                    else f"{s.offset:g} (constant)"
-                )
-                for j, s in h.joints.items()
-            },
-        }
-
-    return {
-        "mapping": where(mapping.source),
-        "format": mapping.format,
-        "fps": mapping.fps,
-        "actor": hand(mapping.actor),
-        "target": hand(mapping.target),
-        "constant_joints": {
-            name: [j for j in HAND_JOINTS if getattr(mapping, name).joints[j].node is None]
-            for name in ("actor", "target")
-        },
-        "takes": [
-            {
-                "path": where(p),
-                "name": d.name,
-                "frames": d.num_frames,
-                "fps": d.fps,
-                "contact_window": [d.contact_begin, d.contact_end],
-                "closest_palm_distance_m": float(
-                    np.linalg.norm(d.actor_points[:, 0], axis=-1).min()
-                ),
-            }
-            for p, d in zip(paths, demos)
-        ],
-    }
-
-
 def run_import(argv: list[str]) -> int:
     args = tyro.cli(ImportArgs, args=argv, description=ImportArgs.__doc__)
     try:
@@ -120,8 +68,7 @@ def run_import(argv: list[str]) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     mocap.save_npz(demos, out)
-    text = json.dumps(report(demos, mapping, args.takes, out.parent), indent=1)
-    out.with_suffix(".report.json").write_text(text + "\n")
+    takes.write_import_report(demos, mapping, args.takes, out)
     print(f"wrote {out} ({len(demos)} demonstrations) and {out.with_suffix('.report.json')}")
     return 0
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Protocol
 
 import jax
@@ -101,6 +102,24 @@ class LearnerSetup:
 
 
 @dataclasses.dataclass(frozen=True)
+class RunServices:
+    """What the project's loop lends a standalone learner, so that the learner's module
+    needs nothing above it (``training.run_services`` makes them)."""
+
+    run_dir: Path
+    config_json: dict[str, Any]
+    """The run's config.json content."""
+    make_envs: Callable[[Any, int], tuple[Any, Any, Any]]
+    """``(config, num_devices) -> (train_env, eval_env, single_env)``."""
+    metrics_log: Callable[[Path], Any]
+    """``run_dir -> `` a metrics.csv / TensorBoard log (``append(row)``, ``rows``, ``close()``)."""
+    plot_success: Callable[[list, Path, str], None]
+    """``(rows, path, title)``: the success curve."""
+    out: Any = None
+    """Where progress is printed (None: stdout)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class LearnerEntry:
     """One registered learner (exactly one of ``build`` and ``run``)."""
 
@@ -111,8 +130,9 @@ class LearnerEntry:
     """Population learner: its factory."""
     ddpg_options: dict[str, Any] = dataclasses.field(default_factory=dict)
     """``DDPGConfig`` options over a preset's (the project's DDPG under this name)."""
-    run: Callable[[Any], dict[str, Any]] | None = None
-    """Standalone learner: trains ``config`` in its own loop, returns the run summary."""
+    run: Callable[[Any, RunServices], dict[str, Any]] | None = None
+    """Standalone learner: ``(config, services)`` trains in its own loop, returns the run
+    summary."""
     load_policy: Callable[[Any, Any, Any], tuple[Any, Any]] | None = None
     """Standalone learner: ``(run_dir, config, single) -> (act, params)``."""
 

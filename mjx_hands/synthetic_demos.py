@@ -146,21 +146,37 @@ def designed_tasks() -> tuple[str, ...]:
     return tuple(t for t in tasks.TASKS if tasks.spec(t).synthetic is not None)
 
 
+def write_task(
+    task: str, out: Path = mocap.SYNTHETIC_PATH, num: int = NUM_DEMOS, seed: int = SEED
+) -> Path:
+    """Generate ``task`` and write ``out/<task>.npz``; a task whose design asks for takes
+    (``TaskSpec.synthetic_takes``) is written as takes into ``out/<task>/`` first and
+    imported from there (with the import's report beside the npz)."""
+    from mjx_hands.mocap import mapping as mapping_lib
+    from mjx_hands.mocap import takes
+
+    demos = generate_task(task, num, seed)
+    file = out / f"{task}.npz"
+    fmt = tasks.spec(task).synthetic_takes
+    if fmt is not None:
+        folder = out / task
+        mapping = mapping_lib.load_mapping(takes.export_demos(demos, folder, fmt))
+        paths = takes.take_paths(folder, fmt)
+        demos = takes.import_takes(paths, mapping, task)
+        takes.write_import_report(demos, mapping, paths, file)
+    mocap.save_npz(demos, file)
+    return file
+
+
 def write_all(
     out: Path = mocap.SYNTHETIC_PATH,
     num: int = NUM_DEMOS,
     seed: int = SEED,
     only: tuple[str, ...] = (),
 ) -> list[Path]:
-    """Generate every task with a synthetic design (or ``only`` those) and write
-    ``out/<task>.npz``."""
+    """Write every task with a synthetic design (or ``only`` those); see :func:`write_task`."""
     out.mkdir(parents=True, exist_ok=True)
-    files = []
-    for task in only or designed_tasks():
-        file = out / f"{task}.npz"
-        mocap.save_npz(generate_task(task, num, seed), file)
-        files.append(file)
-    return files
+    return [write_task(task, out, num, seed) for task in only or designed_tasks()]
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -103,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         config = tyro.cli(train_config.TrainConfig, default=default, args=argv, description=USAGE)
         compile_cache.enable()
         learner = learners.entry(config.algo)
-        return training.run(config) if learner.in_training_loop else learner.run(config)
+        if learner.in_training_loop:
+            return training.run(config)
+        return learner.run(config, training.run_services(config))
 
     summary, code = reported(start)
     if code:

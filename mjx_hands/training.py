@@ -21,7 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from mjx_hands import checkpoint, learners
+from mjx_hands import checkpoint, learners, run_directory, train_config
 from mjx_hands.run_directory import RunDirectory
 from mjx_hands.train_config import TrainConfig, check_population, program_config
 
@@ -98,6 +98,20 @@ def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
         member_info=member_variants(single, list(members)),
     )
     return learners.entry(config.algo).build(setup), single
+
+
+def run_services(config: TrainConfig, out=None, env_factory=None) -> learners.RunServices:
+    """What a standalone learner (``learners.LearnerEntry.run``) gets from the loop:
+    its run folder, config.json, environments (``env_factory`` as :func:`make_learner`)
+    and logs."""
+    return learners.RunServices(
+        run_dir=train_config.run_dir_path(config),
+        config_json=train_config.config_to_json(config),
+        make_envs=env_factory or make_envs,
+        metrics_log=run_directory.MetricsLog,
+        plot_success=run_directory.plot_success,
+        out=out,
+    )
 
 
 # ----------------------------------------------------------------- run
@@ -231,7 +245,8 @@ def run(config: TrainConfig, out=None, env_factory=None) -> dict[str, Any]:
     a summary (final metrics, paths).
 
     ``env_factory``: see :func:`make_learner` (default: the hand environment). Brax's
-    SAC and PPO run through :func:`mjx_hands.brax_agents.run` (train.py picks).
+    Learners with their own loop (Brax's SAC and PPO) run through their registered
+    ``run`` with :func:`run_services` (train.py picks).
     """
     return run_population([config], out, env_factory)[0]
 

@@ -221,20 +221,19 @@ def test_the_exported_skeleton_mapping_parses_back_to_itself(exported):
 
 
 def test_an_imported_task_is_its_takes_imported():
-    # A task without a synthetic design (the fist bump) ships takes and the npz that
-    # import_mocap makes of them; both follow from the module's generator.
+    # A task designed as takes (the fist bump) ships them and the npz import_mocap made
+    # of them; both follow from its design.
+    from mjx_hands import synthetic_demos
+
     for task in tasks.TASKS:
         spec = tasks.spec(task)
-        folder = mocap.SYNTHETIC_PATH / task
-        if spec.synthetic is not None or spec.in_authors_release:
+        if spec.synthetic_takes is None:
             continue
+        folder = mocap.SYNTHETIC_PATH / task
         mapping = mapping_lib.load_mapping(folder / "mapping.toml")
         fresh = takes.import_takes(takes.take_paths(folder, mapping.format), mapping, task)
         stored = mocap.load_synthetic(task)
-        module = __import__(f"mjx_hands.tasks.{task}", fromlist=["DESIGN"])
-        from mjx_hands import synthetic_demos
-
-        designed = synthetic_demos.generate_task(task, len(stored), plan=module.DESIGN)
+        designed = synthetic_demos.generate_task(task, len(stored))
         for a, b, c in zip(stored, fresh, designed):
             assert a.name == b.name
             for field in ("actor_joints", "target_joints", "actor_points", "actor_palm_rot"):

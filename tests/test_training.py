@@ -557,7 +557,8 @@ def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
         eval_every=2,
         ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000),
     )
-    summary = brax_agents.run(config, out=io.StringIO(), env_factory=point_factory)
+    services = training.run_services(config, out=io.StringIO(), env_factory=point_factory)
+    summary = brax_agents.run(config, services)
     assert 0.0 <= summary["final_eval"]["eval/success"] <= 1.0
     assert np.isfinite(summary["final_eval"]["eval/episode_return"])
     assert (run_dir / brax_agents.PARAMS_FILE).stat().st_size > 0
@@ -688,7 +689,8 @@ def test_brax_trainers_refuse_a_run_directory_that_holds_a_run(tmp_path):
     run_dir.mkdir()
     (run_dir / "metrics.csv").write_text("epoch\n1\n")
     with pytest.raises(FileExistsError, match="choose another --run-dir for --algo ppo"):
-        brax_agents.run(_config(run_dir, algo="ppo"), out=io.StringIO(), env_factory=point_factory)
+        config = _config(run_dir, algo="ppo")
+        brax_agents.run(config, training.run_services(config, io.StringIO(), point_factory))
     with pytest.raises(ValueError, match="--algo ppo has its own loop"):
         training.run(_config(tmp_path / "other", algo="ppo"), out=io.StringIO())
     assert (run_dir / "metrics.csv").read_text() == "epoch\n1\n"

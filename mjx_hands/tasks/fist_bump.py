@@ -1,12 +1,12 @@
 """Fist bump: two fists meet knuckles first, thumbs on the same side.
 
 The fourth interaction, added as one module: the paper did not study it, so it has no
-authors' weights, target box or ratings and trains with the project profile; its
-demonstrations are imported (``mocap_data/fist_bump/``: BVH takes that this module's
-:data:`DESIGN` generates, said plainly synthetic, turned into ``mocap_data/fist_bump.npz``
-by ``import_mocap``)::
+authors' weights, target box or ratings and trains with the project profile. Its
+demonstrations come in through the importer, as a lab's would: ``mocap_data/fist_bump/``
+holds BVH takes drawn from this module's :data:`DESIGN` (synthetic, said plainly) and
+``mocap_data/fist_bump.npz`` is what ``import_mocap`` made of them::
 
-    python -c "from mjx_hands.tasks import fist_bump; fist_bump.write_takes()"
+    python -m mjx_hands.synthetic_demos --task fist_bump   # rewrite the takes, import them
 
 Success: the middle knuckle, or the index and ring knuckles together, touch the other
 hand: the fist's face, not an edge (the proximal phalanges face forward in a fist).
@@ -47,8 +47,7 @@ DESIGN = SyntheticDesign(
     contact_jitter=(0.006, 0.006, 0.002),  # across the fist's face, little along it
     retreat=(0.0, 0.2, 0.0),  # straight back, a little from above
 )
-"""The design of the generated takes (not ``SPEC.synthetic``: the task's demonstrations
-come in through the importer, as a lab's would)."""
+"""The design of the generated takes."""
 
 SPEC = TaskSpec(
     name="fist_bump",
@@ -56,22 +55,6 @@ SPEC = TaskSpec(
     required_contacts=("ff_proximal", "mf_proximal", "rf_proximal"),
     contact_rotation=THUMB_UP_PALM_FORWARD,
     contact_groups=(("mf_proximal", "ff_proximal"), ("mf_proximal", "rf_proximal")),
+    synthetic=DESIGN,
+    synthetic_takes="bvh",
 )
-
-TAKES = "fist_bump"
-"""Folder of the generated takes inside ``mocap_data/``."""
-
-
-def write_takes(num: int = 8) -> None:
-    """Generate the takes (BVH) and import them into ``mocap_data/fist_bump.npz``."""
-    from mjx_hands import import_mocap, mocap, synthetic_demos
-    from mjx_hands.mocap import takes
-
-    folder = mocap.SYNTHETIC_PATH / TAKES
-    demos = synthetic_demos.generate_task(SPEC.name, num, plan=DESIGN)
-    mapping = takes.export_demos(demos, folder, "bvh")
-    paths = [str(p) for p in takes.take_paths(folder, "bvh")]
-    out = str(mocap.SYNTHETIC_PATH / f"{SPEC.name}.npz")
-    argv = ["import", "--task", SPEC.name, "--mapping", str(mapping), "--out", out]
-    import_mocap.main(argv + paths)
-

@@ -129,6 +129,10 @@ class TaskSpec:
     synthetic: SyntheticDesign | None = None
     """The design of the project's own demonstrations (``mocap_data/<name>.npz``); None
     for a task whose demonstrations come only from recordings."""
+    synthetic_takes: str | None = None
+    """None: the designed demonstrations go straight into ``mocap_data/<name>.npz``;
+    "bvh" or "motive": they are written as takes of that format into
+    ``mocap_data/<name>/`` and imported from there, as a lab's recordings would be."""
     paper_raters_score: float | None = None
     """The paper's Table I: mean rating in favour of the imitation-trained policy (-2..2);
     None for a task the paper did not study."""
