@@ -96,6 +96,8 @@ class Population:
                     )
         self.env = env
         self.eval_env = eval_env or env
+        self.envs_per_member = int(env.num_envs)
+        """Environments of one member on one device (the batched env's ``num_envs``)."""
         self.episode_length = episode_length
         self.members = members
         self.member_info = member_info

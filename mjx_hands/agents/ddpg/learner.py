@@ -415,7 +415,7 @@ class DDPG:
         )
         buffer = replay.create(self.config.replay_capacity // self.num_devices, example)
         buffer = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.members,) + x.shape), buffer)
-        shape = env_state.reward.shape  # (members, n)
+        shape = (self.members, self.population.envs_per_member)
         stats = EpisodeStats(jnp.zeros(shape), jnp.zeros(shape))
         env_steps = jnp.zeros((self.members,), jnp.int32)
         return TrainerState(learner, env_state, buffer, stats, rng, env_steps)
@@ -458,7 +458,7 @@ class DDPG:
             learner, sgd_metrics = jax.lax.cond(
                 ready,
                 lambda learner: jax.vmap(
-                    functools.partial(self._train, num_envs=env_state.reward.shape[1])
+                    functools.partial(self._train, num_envs=self.population.envs_per_member)
                 )(learner, buffer, k_sgd),
                 lambda learner: (learner, self._zero_sgd_metrics()),
                 learner,
@@ -469,7 +469,7 @@ class DDPG:
                 buffer=buffer,
                 stats=stats,
                 rng=rng,
-                env_steps=state.env_steps + flat.reward.shape[1],
+                env_steps=state.env_steps + cfg.unroll_length * self.population.envs_per_member,
             )
             return state, (finished, sgd_metrics)
 
