@@ -4,10 +4,11 @@ The hand environment speaks Brax's ``Env`` API, so Brax's trainers run it. Their
 default wrappers would restart a finished episode from its cached *first* state
 without new randomisation (and keep counting the env's own episode step), so the
 trainers get :func:`wrap_for_brax` instead: the project's batched auto-reset, which
-draws a fresh demonstration, target and start for every episode. The environment
-budget equals DDPG's for the same config: ``epochs × num_envs × unroll_length ×
-iterations_per_epoch`` steps; ``eval_every`` sets how many evaluations Brax runs.
-Networks are 3×256 like DDPG's. After training the deterministic policy is evaluated
+draws a fresh demonstration, target and start for every episode. Each trainer has its
+own settings (:class:`SACConfig`, :class:`PPOConfig`: ``--sac.*``, ``--ppo.*``), which
+``train.py``'s presets size like the DDPG preset beside them (:meth:`SACConfig.like`):
+the same budget (``epochs × num_envs × env_steps_per_epoch``), 3×256 networks, DDPG's
+replay sizes for SAC; ``eval_every`` sets how many evaluations Brax runs. After training the deterministic policy is evaluated
 with the same success measure as DDPG (:func:`mjx_hands.rollouts.rollout`) and the
 parameters are saved with ``brax.io.model`` as ``RUN_DIR/brax_params.pkl``;
 :func:`load_policy` rebuilds the policy from them (``mjx_hands.evaluate`` and the other
@@ -16,6 +17,7 @@ evaluations load a SAC or PPO run through it).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import time
@@ -31,6 +33,69 @@ ALGOS = ("sac", "ppo")
 """The Brax trainers this module runs (``TrainConfig.algo``)."""
 PARAMS_FILE = "brax_params.pkl"
 """The trained parameters in a run folder (``brax.io.model`` format)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SACConfig:
+    """Brax's SAC as ``--algo sac`` trains it (``--sac.*``)."""
+
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layers of the policy and Q networks."""
+    learning_rate: float = 1e-3
+    discount: float | None = None
+    """None: 1 - 1 / episode length (as DDPG's)."""
+    batch_size: int = 256
+    min_replay_size: int = 2_000
+    max_replay_size: int = 1_000_000
+    grad_updates_per_step: int = 4
+    """SGD updates per environment step of the whole batch."""
+    env_steps_per_epoch: int = 100
+    """Steps of every environment per epoch: the budget is ``epochs × num_envs ×`` it."""
+
+    @staticmethod
+    def like(ddpg) -> SACConfig:
+        """Sized like a ``DDPGConfig``: its networks, critic learning rate, discount, batch,
+        replay sizes, updates per env step and steps per epoch (what SAC read before it had
+        settings of its own, so a run's config.json without them reads back as it ran)."""
+        return SACConfig(
+            hidden_sizes=tuple(ddpg.hidden_sizes),
+            learning_rate=ddpg.critic_learning_rate,
+            discount=ddpg.discount,
+            batch_size=ddpg.batch_size,
+            min_replay_size=ddpg.min_replay_size,
+            max_replay_size=ddpg.replay_capacity,
+            grad_updates_per_step=max(1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)),
+            env_steps_per_epoch=ddpg.unroll_length * ddpg.iterations_per_epoch,
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    """Brax's PPO as ``--algo ppo`` trains it (``--ppo.*``)."""
+
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layers of the policy and value networks."""
+    learning_rate: float = 3e-4
+    discount: float | None = None
+    """None: 1 - 1 / episode length (as DDPG's)."""
+    unroll_length: int = 10
+    batch_size: int | None = None
+    """None: a quarter of ``num_envs``."""
+    num_minibatches: int = 4
+    num_updates_per_batch: int = 4
+    entropy_cost: float = 1e-3
+    env_steps_per_epoch: int = 100
+    """Steps of every environment per epoch: the budget is ``epochs × num_envs ×`` it."""
+
+    @staticmethod
+    def like(ddpg) -> PPOConfig:
+        """Sized like a ``DDPGConfig``: its networks, discount, unroll and steps per epoch."""
+        return PPOConfig(
+            hidden_sizes=tuple(ddpg.hidden_sizes),
+            discount=ddpg.discount,
+            unroll_length=ddpg.unroll_length,
+            env_steps_per_epoch=ddpg.unroll_length * ddpg.iterations_per_epoch,
+        )
 
 
 def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomization_fn=None):
@@ -80,7 +145,7 @@ def wrap_for_brax(env, episode_length: int, action_repeat: int = 1, randomizatio
 
 
 def network_factory(algo: str, hidden_sizes: tuple[int, ...]):
-    """Brax's network factory for ``algo``, with these hidden layers (DDPG's)."""
+    """Brax's network factory for ``algo``, with these hidden layers."""
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.sac import networks as sac_networks
 
@@ -113,7 +178,10 @@ def load_policy(run_dir, config, single):
         )
     params = brax_model.load_params(str(path))
     apply = _rebuilt_apply(
-        config.algo, tuple(config.ddpg.hidden_sizes), single.observation_size, single.action_size
+        config.algo,
+        tuple(getattr(config, config.algo).hidden_sizes),
+        single.observation_size,
+        single.action_size,
     )
     return jax.tree_util.Partial(apply, params), params
 
@@ -168,10 +236,10 @@ def run(config, services) -> dict[str, Any]:
     (run_dir / "config.json").write_text(json.dumps(services.config_json, indent=2))
     _, _, single = services.make_envs(config, 1)
     episode_length = single.episode_length
-    ddpg = config.ddpg
-    num_timesteps = config.epochs * config.num_envs * ddpg.unroll_length * ddpg.iterations_per_epoch
+    own = getattr(config, config.algo)  # SACConfig or PPOConfig
+    num_timesteps = config.epochs * config.num_envs * own.env_steps_per_epoch
     num_evals = max(2, config.epochs // config.eval_every + 1)
-    gamma = ddpg.discount if ddpg.discount is not None else 1.0 - 1.0 / episode_length
+    gamma = own.discount if own.discount is not None else 1.0 - 1.0 / episode_length
     log = services.metrics_log(run_dir)
     started = time.perf_counter()
 
@@ -204,23 +272,23 @@ def run(config, services) -> dict[str, Any]:
     if config.algo == "ppo":
         make_policy, params, _ = ppo.train(
             **common,
-            learning_rate=3e-4,
-            unroll_length=ddpg.unroll_length,
-            batch_size=max(config.num_envs // 4, 1),
-            num_minibatches=4,
-            num_updates_per_batch=4,
-            entropy_cost=1e-3,
-            network_factory=network_factory(config.algo, config.ddpg.hidden_sizes),
+            learning_rate=own.learning_rate,
+            unroll_length=own.unroll_length,
+            batch_size=own.batch_size or max(config.num_envs // 4, 1),
+            num_minibatches=own.num_minibatches,
+            num_updates_per_batch=own.num_updates_per_batch,
+            entropy_cost=own.entropy_cost,
+            network_factory=network_factory(config.algo, own.hidden_sizes),
         )
     elif config.algo == "sac":
         make_policy, params, _ = sac.train(
             **common,
-            learning_rate=ddpg.critic_learning_rate,
-            batch_size=ddpg.batch_size,
-            min_replay_size=ddpg.min_replay_size,
-            max_replay_size=ddpg.replay_capacity,
-            grad_updates_per_step=max(1, ddpg.updates_per_iteration // max(ddpg.unroll_length, 1)),
-            network_factory=network_factory(config.algo, config.ddpg.hidden_sizes),
+            learning_rate=own.learning_rate,
+            batch_size=own.batch_size,
+            min_replay_size=own.min_replay_size,
+            max_replay_size=own.max_replay_size,
+            grad_updates_per_step=own.grad_updates_per_step,
+            network_factory=network_factory(config.algo, own.hidden_sizes),
         )
     else:
         raise ValueError(f"unknown Brax algorithm {config.algo!r}; expected sac or ppo")

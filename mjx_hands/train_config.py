@@ -14,6 +14,7 @@ import jax
 
 from mjx_hands import checkpoint, learners, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
+from mjx_hands.brax_agents import PPOConfig, SACConfig
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 
@@ -86,6 +87,10 @@ class TrainConfig:
     """Include the replay buffer in checkpoints (resume then equals an uninterrupted run)."""
     ddpg: DDPGConfig = DDPGConfig()
     """DDPG hyperparameters."""
+    sac: SACConfig = SACConfig()
+    """Brax's SAC (``--algo sac``); the presets size it like their DDPG."""
+    ppo: PPOConfig = PPOConfig()
+    """Brax's PPO (``--algo ppo``); the presets size it like their DDPG."""
     replay_ratio: float | None = None
     """Replayed transitions per collected one (updates x batch size / env steps), held as
     --num-envs changes: when set, it fixes --ddpg.updates-per-iteration (rounded to a
@@ -197,6 +202,7 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
         )
     else:
         raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
+    base = dataclasses.replace(base, sac=SACConfig.like(base.ddpg), ppo=PPOConfig.like(base.ddpg))
     if overrides.get("profile") == "paper":
         paper = profiles.paper_learner(overrides.get("task", base.task))
         base = dataclasses.replace(
@@ -252,7 +258,15 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
     for key in ("hidden_sizes", "target_clip", "value_range"):
         if ddpg.get(key) is not None:
             ddpg[key] = tuple(ddpg[key])
-    return TrainConfig(**data, ddpg=DDPGConfig(**ddpg))
+    ddpg = DDPGConfig(**ddpg)
+    # Runs from before SAC and PPO had settings of their own trained with DDPG's sizes.
+    own = {"sac": SACConfig.like(ddpg), "ppo": PPOConfig.like(ddpg)}
+    for name, kind in (("sac", SACConfig), ("ppo", PPOConfig)):
+        if name in data:
+            fields = dict(data.pop(name))
+            fields["hidden_sizes"] = tuple(fields.get("hidden_sizes", (256, 256, 256)))
+            own[name] = kind(**fields)
+    return TrainConfig(**data, ddpg=ddpg, **own)
 
 
 def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:

@@ -555,7 +555,10 @@ def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
         algo=algo,
         epochs=4,
         eval_every=2,
-        ddpg=dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000),
+        sac=brax_agents.SACConfig.like(
+            dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000)
+        ),
+        ppo=brax_agents.PPOConfig.like(SMALL),
     )
     services = training.run_services(config, out=io.StringIO(), env_factory=point_factory)
     summary = brax_agents.run(config, services)
@@ -959,3 +962,21 @@ def test_training_commands_let_help_interrupts_and_bugs_through(passes):
 
     with pytest.raises(type(passes)):
         train_cli.reported(start)
+
+
+def test_sac_and_ppo_have_their_own_settings_sized_like_the_preset():
+    cpu = train_config.preset("cpu", algo="sac")
+    assert cpu.sac == brax_agents.SACConfig.like(cpu.ddpg)
+    assert cpu.sac.grad_updates_per_step == max(
+        1, cpu.ddpg.updates_per_iteration // cpu.ddpg.unroll_length
+    )
+    assert cpu.ppo.env_steps_per_epoch == cpu.ddpg.unroll_length * cpu.ddpg.iterations_per_epoch
+    # A run's config.json from before they existed reads back as it trained: DDPG's sizes.
+    data = train_config.config_to_json(cpu)
+    del data["sac"], data["ppo"]
+    old = train_config.config_from_json(json.loads(json.dumps(data)))
+    assert old.sac == cpu.sac and old.ppo == cpu.ppo
+    # Their own settings survive config.json.
+    mine = dataclasses.replace(cpu, sac=dataclasses.replace(cpu.sac, batch_size=77))
+    back = train_config.config_from_json(json.loads(json.dumps(train_config.config_to_json(mine))))
+    assert back.sac.batch_size == 77 and back == train_config.resolved(mine)
