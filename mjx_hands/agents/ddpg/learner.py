@@ -35,7 +35,8 @@ import optax
 from flax import struct
 
 from mjx_hands import checkpoint
-from mjx_hands.agents.ddpg import losses, networks, replay
+from mjx_hands.agents.ddpg import networks, replay, update
+from mjx_hands.agents.ddpg.update import LearnerState
 from mjx_hands.agents.population import (
     AXIS,
     Population,
@@ -158,20 +159,6 @@ class DDPGConfig:
 
 
 @struct.dataclass
-class LearnerState:
-    """Everything SGD changes for one run; replicated over devices."""
-
-    actor_params: Any
-    critic_params: Any
-    target_actor_params: Any
-    target_critic_params: Any
-    actor_opt_state: Any
-    critic_opt_state: Any
-    normalizer: networks.Normalizer
-    updates: jax.Array  # () int32
-
-
-@struct.dataclass
 class EpisodeStats:
     """Running sums of the episodes in progress, per environment (num_envs,)."""
 
@@ -262,6 +249,16 @@ class DDPG:
         self.support = jnp.linspace(*config.value_range, config.num_atoms)  # C51's returns
         self.actor_opt = optax.adam(config.actor_learning_rate)
         self.critic_opt = optax.adam(config.critic_learning_rate)
+        self.model = update.Model(
+            config,
+            self.actor,
+            self.critic,
+            self.actor_opt,
+            self.critic_opt,
+            self.gamma,
+            self.support,
+            self.num_devices,
+        )
         self.trace_count = 0
         """How often the epoch function was traced (1 after any number of epochs)."""
         self._init = self.population.pmap(self._init_device)
@@ -271,35 +268,14 @@ class DDPG:
 
     # ------------------------------------------------------------- networks
     def normalize(self, learner: LearnerState, obs: jax.Array) -> jax.Array:
-        if not self.config.normalize_observations:
-            return obs
-        return learner.normalizer.normalize(obs, self.config.observation_clip)
+        return self.model.normalize(learner, obs)
 
     def policy(self, learner: LearnerState, obs: jax.Array) -> jax.Array:
         """Deterministic action (..., act) of one run's learner for observations (..., obs)."""
-        return self.actor.apply(learner.actor_params, self.normalize(learner, obs))
-
-    def critic_outputs(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
-        """Every critic's output for normalised obs (..., obs), action (..., act): Q
-        (critics, ...), or a distributional critic's logits (critics, ..., atoms)."""
-        if self.config.twin_critics:
-            return jax.vmap(lambda p: self.critic.apply(p, obs, action))(critic_params)
-        return self.critic.apply(critic_params, obs, action)[None]
-
-    def critic_values(self, critic_params, obs: jax.Array, action: jax.Array) -> jax.Array:
-        """Q of every critic, (critics, ...): a distributional critic's mean."""
-        out = self.critic_outputs(critic_params, obs, action)
-        return jax.nn.softmax(out) @ self.support if self.config.num_atoms > 1 else out
+        return self.model.policy(learner, obs)
 
     def _explore(self, learner: LearnerState, obs: jax.Array, rng: jax.Array) -> jax.Array:
-        k_noise, k_random, k_pick = jax.random.split(rng, 3)
-        action = self.policy(learner, obs)
-        action = jnp.clip(
-            action + self.config.noise_scale * jax.random.normal(k_noise, action.shape), -1, 1
-        )
-        random = jax.random.uniform(k_random, action.shape, minval=-1.0, maxval=1.0)
-        pick = jax.random.uniform(k_pick, action.shape[:-1] + (1,)) < self.config.random_action_prob
-        return jnp.where(pick, random, action)
+        return update.explore(self.model, learner, obs, rng)
 
     # ------------------------------------------------------------------ init
     @functools.cached_property
@@ -460,7 +436,7 @@ class DDPG:
                 lambda learner: jax.vmap(
                     functools.partial(self._train, num_envs=self.population.envs_per_member)
                 )(learner, buffer, k_sgd),
-                lambda learner: (learner, self._zero_sgd_metrics()),
+                lambda learner: (learner, update.zero_sgd_metrics(self.model, self.members)),
                 learner,
             )
             state = state.replace(
@@ -532,144 +508,14 @@ class DDPG:
         stats = EpisodeStats(episode_return * (1 - done), episode_success * (1 - done))
         return (next_state, stats), (transition, finished)
 
-    def _zero_sgd_metrics(self) -> dict[str, jax.Array]:
-        keys = ("critic_loss", "q", "target_q", "actor_loss", "action_penalty")
-        cfg = self.config
-        zero = jnp.zeros((self.members, cfg.updates_per_iteration // cfg.actor_update_interval))
-        return {f"sgd/{k}": zero for k in keys}
-
     def _train(
         self, learner: LearnerState, buffer: replay.ReplayBuffer, rng: jax.Array, num_envs: int
     ):
-        """``updates_per_iteration`` SGD updates, then a Polyak step of the targets (one
-        run); ``num_envs``: this device's environments of the run (the buffer's stride)."""
-        cfg = self.config
-        per_device = cfg.batch_size // self.num_devices
-        smooth = cfg.target_policy_noise > 0
+        return update.train(self.model, learner, buffer, rng, num_envs)
 
-        def update(learner: LearnerState, key, actor: bool = True):
-            # Keys split only for the options that need them: the paper's DDPG draws
-            # exactly the minibatches it always drew.
-            k_batch, k_noise = jax.random.split(key) if smooth else (key, None)
-            if cfg.n_step > 1:
-                batch = replay.sample_n_step(
-                    buffer, k_batch, per_device, cfg.n_step, self.gamma, num_envs
-                )
-            else:
-                batch = replay.sample(buffer, k_batch, per_device)
-            return self.sgd_step(learner, batch, k_noise, actor=actor)
-
-        keys = jax.random.split(rng, cfg.updates_per_iteration)
-        interval = cfg.actor_update_interval
-        if interval == 1:
-            learner, metrics = jax.lax.scan(update, learner, keys)
-        else:
-            # Blocks of (interval - 1) critic updates, then one of critic and actor.
-            def block(learner: LearnerState, block_keys):
-                learner, _ = jax.lax.scan(
-                    functools.partial(update, actor=False), learner, block_keys[:-1]
-                )
-                return update(learner, block_keys[-1])
-
-            blocks = keys.reshape((-1, interval) + keys.shape[1:])
-            learner, metrics = jax.lax.scan(block, learner, blocks)
-        learner = learner.replace(
-            target_actor_params=losses.polyak(
-                learner.target_actor_params, learner.actor_params, self.config.polyak
-            ),
-            target_critic_params=losses.polyak(
-                learner.target_critic_params, learner.critic_params, self.config.polyak
-            ),
-        )
-        return learner, metrics
-
-    def sgd_step(
-        self,
-        learner: LearnerState,
-        batch: replay.Transition,
-        noise_key: jax.Array | None = None,
-        actor: bool = True,
-    ):
-        """One critic update and (with ``actor``) one actor update on ``batch`` (leaves
-        (per-device batch, ...)); both gradients are taken at the current parameters.
-        ``noise_key`` draws the target policy smoothing noise (when that is on)."""
-        cfg = self.config
-        batch = batch.replace(
-            obs=self.normalize(learner, batch.obs), next_obs=self.normalize(learner, batch.next_obs)
-        )
-        smoothing = None
-        if cfg.target_policy_noise > 0:
-            smoothing = (noise_key, cfg.target_policy_noise, cfg.target_noise_clip)
-        if cfg.num_atoms > 1:
-            critic_loss = functools.partial(
-                losses.distributional_critic_loss,
-                critic_logits=self.critic_outputs,
-                support=self.support,
-            )
-        else:
-            critic_loss = functools.partial(
-                losses.critic_loss, critic_apply=self.critic_values, target_clip=cfg.target_clip
-            )
-        critic_grad, (critic_metrics, critic_vars) = jax.grad(critic_loss, has_aux=True)(
-            learner.critic_params,
-            learner.target_actor_params,
-            learner.target_critic_params,
-            batch,
-            actor_apply=self.actor.apply,
-            gamma=self.gamma,
-            critic_train_apply=self._train_apply(self.critic, ensemble_axis=True),
-            smoothing=smoothing,
-        )
-        critic_grad = jax.lax.pmean(critic_grad, AXIS)
-        critic_updates, critic_opt_state = self.critic_opt.update(
-            critic_grad, learner.critic_opt_state
-        )
-        critic_params = optax.apply_updates(learner.critic_params, critic_updates)
-        metrics = critic_metrics
-        if actor:
-            actor_grad, (actor_metrics, actor_vars) = jax.grad(losses.actor_loss, has_aux=True)(
-                learner.actor_params,
-                learner.critic_params,
-                batch.obs,
-                actor_apply=self.actor.apply,
-                critic_apply=self.critic_values,
-                action_l2=cfg.action_l2,
-                actor_train_apply=self._train_apply(self.actor),
-            )
-            actor_grad = jax.lax.pmean(actor_grad, AXIS)
-            actor_updates, actor_opt_state = self.actor_opt.update(
-                actor_grad, learner.actor_opt_state
-            )
-            actor_params = optax.apply_updates(learner.actor_params, actor_updates)
-            metrics = metrics | actor_metrics
-            if cfg.batch_norm:
-                # Running averages of the minibatch statistics, the same on every device.
-                stats = jax.lax.pmean((critic_vars["batch_stats"], actor_vars["batch_stats"]), AXIS)
-                critic_params = critic_params | {"batch_stats": stats[0]}
-                actor_params = actor_params | {"batch_stats": stats[1]}
-            learner = learner.replace(actor_params=actor_params, actor_opt_state=actor_opt_state)
-        elif cfg.batch_norm:
-            stats = jax.lax.pmean(critic_vars["batch_stats"], AXIS)
-            critic_params = critic_params | {"batch_stats": stats}
-        learner = learner.replace(
-            critic_params=critic_params,
-            critic_opt_state=critic_opt_state,
-            updates=learner.updates + 1,
-        )
-        metrics = jax.lax.pmean(metrics, AXIS)
-        return learner, {f"sgd/{k}": v for k, v in metrics.items()}
-
-    def _train_apply(self, module, ensemble_axis: bool = False):
-        """Forward pass in training mode: (variables, *inputs) -> (output, new variables);
-        ``ensemble_axis`` adds the critics' leading axis (one critic with batch norm)."""
-        if not self.config.batch_norm:
-            return None
-
-        def apply(variables, *inputs):
-            out, updates = module.apply(variables, *inputs, train=True, mutable=["batch_stats"])
-            return (out[None] if ensemble_axis else out), variables | updates
-
-        return apply
+    def sgd_step(self, learner: LearnerState, batch, noise_key=None, actor: bool = True):
+        """:func:`update.sgd_step` with this trainer's model."""
+        return update.sgd_step(self.model, learner, batch, noise_key, actor=actor)
 
     # ------------------------------------------------------------ evaluation
     def evaluate(self, state: TrainerState, rng: jax.Array) -> list[dict[str, float]]:
