@@ -182,8 +182,9 @@ class EnvConfig:
     """'project' (the project's observation, contact rule, weights and target box) or
     'paper' (the authors' environment): see ``mjx_hands.profiles``."""
     reward: str = "full"
-    """Reward variant: 'full', 'baseline1' (palm position), 'baseline2' (no contact),
-    'no_imitation'."""
+    """Reward form (``reward_params.REWARD_FORMS``): 'full', 'baseline1' (palm position),
+    'baseline2' (no contact); with ``imitation`` it makes one of the named
+    ``reward_params.VARIANTS``."""
     imitation: bool = True
     """Imitation terms r_pI, r_αI on top of the variant (False: any variant without them)."""
     knobs: reward_params.RewardKnobs | None = None

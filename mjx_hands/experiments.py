@@ -34,24 +34,20 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tyro
 
-from mjx_hands import cli, compile_cache, learners, run_directory, train_cli, train_config, training
+from mjx_hands import (
+    cli,
+    compile_cache,
+    learners,
+    reward_params,
+    run_directory,
+    train_cli,
+    train_config,
+    training,
+)
 from mjx_hands.grids import GRID_FILE, HEADLINE, load_grid, read_rows
 from mjx_hands.statistics import ALPHA, holm, mean_se, welch
 
-VARIANTS: dict[str, tuple[str, bool]] = {
-    "full": ("full", True),
-    "no_imitation": ("full", False),
-    "baseline1": ("baseline1", False),
-    "baseline2": ("baseline2", False),
-    "baseline1_imitation": ("baseline1", True),
-    "baseline2_imitation": ("baseline2", True),
-}
-"""Grid variant -> (``--reward``, ``--imitation``) of its runs. ``full``: the paper's
-reward r = r_p + r_alpha + r_c + r_a + r_pI + r_alphaI; ``no_imitation``: without r_pI,
-r_alphaI (the authors' released configs: their imitation weights are 0);
-``baseline1``: palm position instead of fingertips, contact term kept; ``baseline2``: no
-contact term -- both without imitation, as the authors' baseline configs."""
-
+VARIANTS = reward_params.VARIANTS  # the one vocabulary of reward variants
 Variant = Literal[tuple(VARIANTS)]
 FIG4_VARIANTS = ("full", "baseline1", "baseline2", "no_imitation")
 HIGH_SUCCESS = 0.8  # "a high success rate" (statement 3)
@@ -76,7 +72,7 @@ def members(grid: GridConfig) -> list[tuple[str, Any]]:
     run_dir = Path(base.run_dir)
     out = []
     for variant in grid.variants:
-        reward, imitation = VARIANTS[variant]
+        reward, imitation = VARIANTS[variant].reward, VARIANTS[variant].imitation
         for seed in range(base.seed, base.seed + grid.seeds):
             config = dataclasses.replace(
                 base,

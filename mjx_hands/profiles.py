@@ -152,7 +152,7 @@ def reward_weights(
     if check(profile) == "paper":
         return paper_weights(task, reward, imitation, knobs)
     base = reward_params.task_weights(task, knobs)
-    weights = reward_params.variant(reward, base)
+    weights = reward_params.reward_form(reward, base)
     return weights if imitation else dataclasses.replace(weights, imitation=False)
 
 

@@ -168,12 +168,37 @@ class RewardWeights:
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
-_VARIANTS = {
+REWARD_FORMS = {
     "full": {},
     "baseline1": {"position_points": "palm"},
     "baseline2": {"contact": False},
-    "no_imitation": {"imitation": False},
 }
+"""The reward's forms (the authors' config names; ``EnvConfig.reward``): ``full``, the
+proposed reward; ``baseline1``, palm position instead of fingertips; ``baseline2``, no
+contact term. Imitation is a switch of its own."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardVariant:
+    """A named reward of the paper's comparison: a form and whether imitation is on."""
+
+    reward: str
+    imitation: bool
+
+
+VARIANTS: dict[str, RewardVariant] = {
+    "full": RewardVariant("full", True),
+    "no_imitation": RewardVariant("full", False),
+    "baseline1": RewardVariant("baseline1", False),
+    "baseline2": RewardVariant("baseline2", False),
+    "baseline1_imitation": RewardVariant("baseline1", True),
+    "baseline2_imitation": RewardVariant("baseline2", True),
+}
+"""The one vocabulary of reward variants (grids, reports, naturalness, the study):
+``full`` is the paper's r = r_p + r_alpha + r_c + r_a + r_pI + r_alphaI;
+``no_imitation`` the same without r_pI, r_alphaI (the authors' released main configs);
+``baseline1`` and ``baseline2`` their forms without imitation, as the authors' baseline
+configs; ``*_imitation`` with it."""
 
 
 KNOB_NAMES = ("K_p", "K_alpha", "K_c", "K_a", "K_pI", "K_alphaI")
@@ -216,15 +241,22 @@ def task_knobs(task: str, knobs: RewardKnobs | None = None) -> RewardKnobs:
     return knobs_of(task_weights(task, knobs))
 
 
-def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:
-    """Named reward configuration of the paper's comparison, built on ``base``'s knobs.
+def reward_form(name: str, base: RewardWeights | None = None) -> RewardWeights:
+    """``base``'s knobs in the reward form ``name`` (:data:`REWARD_FORMS`), imitation as
+    ``base`` has it."""
+    if name not in REWARD_FORMS:
+        raise ValueError(f"unknown reward form {name!r}; expected one of {', '.join(REWARD_FORMS)}")
+    return dataclasses.replace(base or RewardWeights(), **REWARD_FORMS[name])
 
-    ``full``: the proposed reward; ``baseline1``: palm position instead of fingertips;
-    ``baseline2``: no contact term; ``no_imitation``: no imitation terms.
-    """
-    if name not in _VARIANTS:
-        raise ValueError(f"unknown reward variant {name!r}; expected one of {', '.join(_VARIANTS)}")
-    return dataclasses.replace(base or RewardWeights(), **_VARIANTS[name])
+
+def variant(name: str, base: RewardWeights | None = None) -> RewardWeights:
+    """The weights of the reward variant ``name`` (:data:`VARIANTS`), built on ``base``'s
+    knobs."""
+    if name not in VARIANTS:
+        raise ValueError(f"unknown reward variant {name!r}; expected one of {', '.join(VARIANTS)}")
+    chosen = VARIANTS[name]
+    weights = reward_form(chosen.reward, base)
+    return weights if chosen.imitation else dataclasses.replace(weights, imitation=False)
 
 
 @struct.dataclass

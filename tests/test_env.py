@@ -369,7 +369,8 @@ def test_the_reward_is_given_one_way():
     # The handshake trains with the knobs of the authors' config (W_pos 4, W_f 0.5,
     # W_ang 0); clap and E.T. with RewardWeights' defaults; any knob can be set.
     shake = env_lib.reward_weights(env_lib.EnvConfig(task="handshake", reward="baseline2"))
-    assert shake == rp.variant("baseline2", rp.RewardWeights(K_p=4.0, K_c=0.5, K_alpha=0.0))
+    assert shake == rp.reward_form("baseline2", rp.RewardWeights(K_p=4.0, K_c=0.5, K_alpha=0.0))
+    assert shake.imitation and not rp.variant("baseline2").imitation  # the variant has none
     assert env_lib.reward_weights(env_lib.EnvConfig(task="handclap")) == rp.variant("full")
     two = env_lib.EnvConfig(task="handshake", knobs=rp.RewardKnobs(K_p=2.0, K_pI=0.0))
     assert env_lib.reward_weights(two) == rp.RewardWeights(K_p=2.0, K_c=0.5, K_alpha=0.0, K_pI=0.0)

@@ -286,8 +286,14 @@ def test_variants():
     assert rp.variant("no_imitation").imitation is False
     base = RewardWeights(K_p=3.0)
     assert rp.variant("baseline2", base).K_p == 3.0
-    with pytest.raises(ValueError, match="full, baseline1, baseline2, no_imitation"):
+    # One vocabulary: the baselines are the authors' configs, without imitation unless
+    # named so; a reward form alone keeps the imitation switch as it is.
+    assert not rp.variant("baseline1").imitation and rp.variant("baseline1_imitation").imitation
+    assert rp.reward_form("baseline1") == rp.variant("baseline1_imitation")
+    with pytest.raises(ValueError, match="expected one of full, no_imitation, baseline1"):
         rp.variant("baseline3")
+    with pytest.raises(ValueError, match="unknown reward form 'no_imitation'"):
+        rp.reward_form("no_imitation")
 
 
 def test_required_contacts_are_sensors():
