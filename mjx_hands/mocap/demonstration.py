@@ -141,7 +141,7 @@ def check_shape(where: str, name: str, array: np.ndarray, shape: tuple[int, ...]
 class Demonstration:
     """One demonstration, frames 0..T-1 of its window, in the target palm frame.
 
-    task: "handshake" | "handclap" | "et".
+    task: a registered task (``tasks.TASKS``).
     name: e.g. "handshake/optitrack/03", "et/synthetic/02".
     source: "optitrack" | "synthetic".
     fps: capture rate, Hz.
