@@ -144,6 +144,22 @@ def yaw_pitch_quat(yaw: jax.Array, pitch: jax.Array) -> jax.Array:
     )
 
 
+def yaw_pitch_roll_quat(yaw: jax.Array, pitch: jax.Array, roll: jax.Array) -> jax.Array:
+    """Quaternion (4,) of R = R_z(yaw) R_y(pitch) R_x(roll) in the world frame: roll about
+    the agent's line of sight (+x), then :func:`yaw_pitch_quat`."""
+    x = jnp.array([1.0, 0.0, 0.0])
+    return spatial.quat_mul(
+        yaw_pitch_quat(yaw, pitch), spatial.axis_angle_quat(x, jnp.asarray(roll, jnp.float32))
+    )
+
+
+def orientation_tilt(rng: jax.Array, half_ranges: tuple[float, float, float]) -> jax.Array:
+    """Quaternion (4,) of a yaw, pitch and roll each uniform in ``±half_ranges`` (radians)."""
+    half = jnp.asarray(half_ranges, jnp.float32)
+    yaw, pitch, roll = jax.random.uniform(rng, (3,), minval=-half, maxval=half)
+    return yaw_pitch_roll_quat(yaw, pitch, roll)
+
+
 def reflect_into_box(
     position: jax.Array, velocity: jax.Array, center: jax.Array, half: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
@@ -217,6 +233,12 @@ class EnvConfig:
     target_rotation_angle: float | None = None
     """If set, every episode's target hand is turned by exactly this angle (radians)
     about a uniformly random axis instead."""
+    target_orientation_range: tuple[float, float, float] | None = None
+    """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
+    and roll, each drawn uniformly per episode and applied about its palm centre as
+    :func:`yaw_pitch_roll_quat` (yaw about the vertical, pitch about the horizontal axis
+    across the agent's view, roll about the agent's line of sight); goals turn with it.
+    None: the tilt of ``target_rotation_noise`` / ``target_rotation_angle``."""
     target_speed: float | None = None
     """None: the target hand stays where reset put it (the paper's training). A number
     (m/s): it moves at this speed in a uniformly random direction, drawn anew every
@@ -435,7 +457,9 @@ class HandInteractionEnv(Env):
         frame = jax.random.randint(k_frame, (), start, jnp.maximum(t_min, start) + 1)
 
         target_pos = self.target_center + self._box_offset(k_box)
-        if tilt is None:
+        if tilt is None and self.config.target_orientation_range is not None:
+            tilt = orientation_tilt(k_rot, self.config.target_orientation_range)
+        elif tilt is None:
             tilt = target_tilt(
                 k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
             )
@@ -766,10 +790,25 @@ class HandInteractionEnv(Env):
 
 
 def _check_motion(config: EnvConfig) -> None:
-    """Raise ValueError for a moving target that cannot be simulated as configured."""
-    if config.target_speed is None:
-        return
+    """Raise ValueError for a target orientation or motion that cannot be simulated as
+    configured."""
     problems = []
+    ranges = config.target_orientation_range
+    if ranges is not None:
+        if len(ranges) != 3 or not all(np.isfinite(h) and 0 <= h <= np.pi for h in ranges):
+            problems.append(
+                f"target_orientation_range {ranges} must be three half-ranges in [0, pi] "
+                "radians (yaw, pitch, roll)"
+            )
+        if config.target_rotation_noise or config.target_rotation_angle is not None:
+            problems.append(
+                "target_orientation_range and target_rotation_noise/target_rotation_angle "
+                "both turn the target: give one"
+            )
+    if config.target_speed is None:
+        if problems:
+            raise ValueError("EnvConfig: " + "; ".join(problems))
+        return
     if not (np.isfinite(config.target_speed) and config.target_speed >= 0):
         problems.append(f"target_speed {config.target_speed} must be >= 0 m/s (None: static)")
     if not (np.isfinite(config.target_turn_period) and config.target_turn_period > 0):

@@ -50,6 +50,10 @@ class TrainConfig:
     """Which demonstrations to read."""
     demos: Literal["authors", "all"] = "authors"
     """Of the recordings, the demonstrations the authors trained on, or all of them."""
+    target_orientation_range: tuple[float, float, float] | None = None
+    """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
+    and roll, drawn uniformly per episode (``EnvConfig.target_orientation_range``);
+    None: the static orientation of the paper's training."""
     target_rotation_noise: float = 0.0
     """Std (radians) of a random per-episode rotation of the target hand."""
     physics: Literal["auto", "mjx", "native"] = "auto"
@@ -250,6 +254,8 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
+    if data.get("target_orientation_range") is not None:
+        data["target_orientation_range"] = tuple(data["target_orientation_range"])
     if data.get("profile", "project") == "paper":
         data["knobs"] = reward_params.RewardKnobs(**(data.get("knobs") or {}))
     else:

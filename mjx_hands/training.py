@@ -42,6 +42,7 @@ def env_config(config: TrainConfig):
         mocap_path=config.mocap,
         demos=config.demos,
         target_rotation_noise=config.target_rotation_noise,
+        target_orientation_range=config.target_orientation_range,
         physics=config.physics,
     )
 
