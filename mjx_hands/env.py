@@ -91,6 +91,8 @@ def place_target(
 
 
 DEMO_SETS = ("authors", "all")
+SENSING_KEY = 0x5E45
+"""Folded into an episode's key for its sensing errors (``EnvConfig.target_position_noise``)."""
 PAPER_UNOBSERVED_LINKS = ("forearm", "lfmetacarpal")
 
 
@@ -245,6 +247,17 @@ class EnvConfig:
     ``target_turn_period`` seconds and mirrored at the walls of ``target_motion_box``;
     goals and imitation references move with it (the paper's moving-target test,
     ``mjx_hands.robustness``). ``reset_with`` can set the speed per episode."""
+    target_position_noise: float = 0.0
+    """Partner model "sensing": std (metres) of a Gaussian error of the observed target
+    position, drawn anew every control step, as a motion-capture or vision estimate of
+    the partner's hand would carry: everything the observation says about the target
+    (its points or links, the goals and imitation references that follow it) moves by
+    the same error; the physics and the reward see the true hand. 0: exact."""
+    action_delay: int = 0
+    """Partner model "actuation": control steps between a policy's action and the
+    actuators receiving it (a robot controller's latency); the first steps of an episode
+    apply the action that holds the start pose. The reward's action term charges the
+    policy's own action. 0: none."""
     target_turn_period: float = 0.5
     """Seconds between the moving target's changes of direction."""
     target_motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
@@ -301,6 +314,8 @@ class EpisodeInfo:
     goal_points: jax.Array  # (6, 3) goal palm + fingertips, world
     # (3,) m/s of the moving target (``EnvConfig.target_speed``); None: a static target.
     target_velocity: jax.Array | None = None
+    # (delay, 24) actions not yet applied, oldest first (``EnvConfig.action_delay``).
+    action_queue: jax.Array | None = None
 
 
 class HandInteractionEnv(Env):
@@ -510,6 +525,10 @@ class HandInteractionEnv(Env):
             episode = episode.replace(
                 target_velocity=jnp.asarray(speed, jnp.float32) * random_direction(k_motion)
             )
+        if self.config.action_delay > 0:
+            hold = self.action_for(data.ctrl)  # the set-points of the start pose
+            queue = jnp.broadcast_to(hold, (self.config.action_delay,) + hold.shape)
+            episode = episode.replace(action_queue=queue)
         features = self._features(self.physics.readings(data), episode, data)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
@@ -621,7 +640,12 @@ class HandInteractionEnv(Env):
         data, episode = state.pipeline_state, state.info["episode"]
         if episode.target_velocity is not None:
             data, episode = self._move_target(data, episode)
-        data = self.physics.step(data, self.ctrl_for(action))
+        applied = action
+        if episode.action_queue is not None:  # the oldest waiting action, then queue this one
+            queue = episode.action_queue
+            applied = queue[0]
+            episode = episode.replace(action_queue=jnp.concatenate([queue[1:], action[None]]))
+        data = self.physics.step(data, self.ctrl_for(applied))
         readings = self.physics.readings(data)
         episode = episode.replace(step=episode.step + 1)
         features = self._features(readings, episode, data)
@@ -759,7 +783,27 @@ class HandInteractionEnv(Env):
             features["target_links"] = data.mocap_pos[self.target_mocap[self.observed_links]]
         return features
 
+    def sensing_error(self, episode: EpisodeInfo) -> jax.Array:
+        """The observed target's position error (3,) metres at this step of the episode
+        (``target_position_noise``; zeros without it). Keyed by the episode and its step,
+        so nothing else the episode draws changes."""
+        noise = self.config.target_position_noise
+        if noise == 0:
+            return jnp.zeros(3)
+        key = jax.random.fold_in(jax.random.fold_in(episode.rng, SENSING_KEY), episode.step)
+        return noise * jax.random.normal(key, (3,))
+
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
+        error = self.sensing_error(episode)
+        if self.config.target_position_noise:
+            f = f | {"imitation_points": f["imitation_points"] + error}
+            if "target_links" in f:
+                f = f | {"target_links": f["target_links"] + error}
+            episode = episode.replace(
+                target_pos=episode.target_pos + error,
+                target_points=episode.target_points + error,
+                goal_points=episode.goal_points + error,
+            )
         if self.profile.observation == "paper":
             # The authors' _get_obs: joint angles, joint velocities x dt, the target
             # hand's link positions (world) and the touch sensors; no goal, no time.
@@ -805,6 +849,12 @@ def _check_motion(config: EnvConfig) -> None:
                 "target_orientation_range and target_rotation_noise/target_rotation_angle "
                 "both turn the target: give one"
             )
+    if not (np.isfinite(config.target_position_noise) and config.target_position_noise >= 0):
+        problems.append(
+            f"target_position_noise {config.target_position_noise} must be >= 0 metres"
+        )
+    if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
+        problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
     if config.target_speed is None:
         if problems:
             raise ValueError("EnvConfig: " + "; ".join(problems))

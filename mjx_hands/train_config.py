@@ -54,6 +54,12 @@ class TrainConfig:
     """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
     and roll, drawn uniformly per episode (``EnvConfig.target_orientation_range``);
     None: the static orientation of the paper's training."""
+    target_position_noise: float = 0.0
+    """Partner model "sensing": std (metres) of the observed target position's error,
+    drawn every control step (``EnvConfig.target_position_noise``)."""
+    action_delay: int = 0
+    """Partner model "actuation": control steps between an action and the actuators
+    (``EnvConfig.action_delay``)."""
     target_rotation_noise: float = 0.0
     """Std (radians) of a random per-episode rotation of the target hand."""
     physics: Literal["auto", "mjx", "native"] = "auto"

@@ -100,3 +100,65 @@ def test_the_orientation_partner_is_checked_and_recorded(tmp_path):
     back = train_config.config_from_json(data)
     assert back == train_config.resolved(config) and hash(back)  # a tuple again
     assert dataclasses.replace(back, target_orientation_range=None) != back
+
+
+@pytest.fixture(scope="module")
+def clean_and_noisy():
+    """The same handshake env without and with 5 mm sensing noise (native physics)."""
+    make = lambda noise: env_lib.make_env(
+        "handshake", mocap_source="synthetic", physics="native", target_position_noise=noise
+    )
+    return make(0.0), make(0.005)
+
+
+def test_sensing_noise_moves_every_target_quantity_of_the_observation_by_one_error(
+    clean_and_noisy,
+):
+    clean, noisy = clean_and_noisy
+    keys = jax.random.split(jax.random.PRNGKey(5), 512)
+    a = jax.jit(jax.vmap(clean.reset))(keys)
+    b = jax.jit(jax.vmap(noisy.reset))(keys)
+    # The physics and the reward see the true hand; only the observation differs.
+    np.testing.assert_array_equal(a.pipeline_state.qpos, b.pipeline_state.qpos)
+    diff = np.asarray(b.obs) - np.asarray(a.obs)
+    # The project observation's blocks (env._observation): qpos 28, qvel 28, contacts 15,
+    # points - target 18, goals - points 18, imitation 18, target - palm 18, phase 2.
+    blocks = np.split(diff, np.cumsum([28, 28, 15, 18, 18, 18, 18]), axis=1)
+    joints, velocities, contacts, relative, goals, imitation, target, phase = blocks
+    error = target.reshape(512, 6, 3)[:, 0]  # (512, 3) one error per episode
+    for block in (joints, velocities, contacts, phase):
+        np.testing.assert_array_equal(block, 0.0)
+    np.testing.assert_allclose(target.reshape(512, 6, 3), error[:, None].repeat(6, 1), atol=2e-6)
+    np.testing.assert_allclose(relative.reshape(512, 6, 3), -error[:, None].repeat(6, 1), atol=2e-6)
+    np.testing.assert_allclose(goals.reshape(512, 6, 3), error[:, None].repeat(6, 1), atol=2e-6)
+    imitation = imitation.reshape(512, 6, 3)  # zero where the imitation phase is over
+    assert np.all((np.abs(imitation - error[:, None]) < 2e-6) | (imitation == 0))
+    # The error's statistics: mean 0, std 5 mm per axis (standard error ~3 % at n = 512).
+    np.testing.assert_allclose(error.mean(0), 0.0, atol=0.0007)
+    np.testing.assert_allclose(error.std(0), 0.005, rtol=0.1)
+    # A new error every step, from the episode's own key.
+    state = jax.jit(jax.vmap(noisy.step))(b, jnp.zeros((512, 24)))
+    again = np.asarray(state.obs)[:, -20:-2].reshape(512, 6, 3)[:, 0]
+    clean_next = jax.jit(jax.vmap(clean.step))(a, jnp.zeros((512, 24)))
+    step_error = again - np.asarray(clean_next.obs)[:, -20:-2].reshape(512, 6, 3)[:, 0]
+    assert np.abs(step_error - error).max() > 1e-3
+
+
+def test_action_delay_applies_each_action_exactly_its_steps_later():
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native", action_delay=2)
+    state = jax.jit(env.reset)(jax.random.PRNGKey(2))
+    hold = np.asarray(state.pipeline_state.ctrl)
+    step = jax.jit(env.step)
+    actions = np.random.default_rng(0).uniform(-1, 1, (5, 24)).astype(np.float32)
+    applied = []
+    for action in actions:
+        state = step(state, jnp.asarray(action))
+        applied.append(np.asarray(state.pipeline_state.ctrl))
+    np.testing.assert_allclose(applied[0], hold, atol=1e-6)  # the start pose is held
+    np.testing.assert_allclose(applied[1], hold, atol=1e-6)
+    for k in range(2, 5):  # then each action, two steps late
+        np.testing.assert_allclose(applied[k], np.asarray(env.ctrl_for(actions[k - 2])), atol=1e-6)
+    with pytest.raises(ValueError, match="action_delay -1 must be a whole number"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(action_delay=-1))
+    with pytest.raises(ValueError, match="target_position_noise -0.1 must be >= 0"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(target_position_noise=-0.1))
