@@ -247,6 +247,9 @@ class EnvConfig:
     ``target_turn_period`` seconds and mirrored at the walls of ``target_motion_box``;
     goals and imitation references move with it (the paper's moving-target test,
     ``mjx_hands.robustness``). ``reset_with`` can set the speed per episode."""
+    target_speed_range: tuple[float, float] | None = None
+    """Partner model "motion": each episode's speed drawn uniformly from [low, high] m/s
+    (the target moves as with ``target_speed``, which it replaces); None: ``target_speed``."""
     target_position_noise: float = 0.0
     """Partner model "sensing": std (metres) of a Gaussian error of the observed target
     position, drawn anew every control step, as a motion-capture or vision estimate of
@@ -450,7 +453,7 @@ class HandInteractionEnv(Env):
             its palm centre (see :func:`yaw_pitch_quat`); None draws the configured tilt.
           speed: () m/s of the moving target; needs ``target_speed`` set (not None).
         """
-        if speed is not None and self.config.target_speed is None:
+        if speed is not None and not moving(self.config):
             raise ValueError(
                 "reset_with(speed=...) needs a moving target: build the env with "
                 "target_speed set (e.g. 0.0)"
@@ -520,8 +523,14 @@ class HandInteractionEnv(Env):
             target_frames=target_frames,
             goal_points=goal_points,
         )
-        if self.config.target_speed is not None:
-            speed = self.config.target_speed if speed is None else speed
+        if moving(self.config):
+            if speed is None and self.config.target_speed_range is not None:
+                low, high = self.config.target_speed_range
+                speed = jax.random.uniform(
+                    jax.random.fold_in(k_motion, 1), (), minval=low, maxval=high
+                )
+            elif speed is None:
+                speed = self.config.target_speed
             episode = episode.replace(
                 target_velocity=jnp.asarray(speed, jnp.float32) * random_direction(k_motion)
             )
@@ -833,6 +842,11 @@ class HandInteractionEnv(Env):
         )
 
 
+def moving(config: EnvConfig) -> bool:
+    """Whether ``config``'s target hand moves (``target_speed`` or ``target_speed_range``)."""
+    return config.target_speed is not None or config.target_speed_range is not None
+
+
 def _check_motion(config: EnvConfig) -> None:
     """Raise ValueError for a target orientation or motion that cannot be simulated as
     configured."""
@@ -850,17 +864,24 @@ def _check_motion(config: EnvConfig) -> None:
                 "both turn the target: give one"
             )
     if not (np.isfinite(config.target_position_noise) and config.target_position_noise >= 0):
-        problems.append(
-            f"target_position_noise {config.target_position_noise} must be >= 0 metres"
-        )
+        problems.append(f"target_position_noise {config.target_position_noise} must be >= 0 metres")
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
-    if config.target_speed is None:
+    if not moving(config):
         if problems:
             raise ValueError("EnvConfig: " + "; ".join(problems))
         return
-    if not (np.isfinite(config.target_speed) and config.target_speed >= 0):
+    if config.target_speed is not None and not (
+        np.isfinite(config.target_speed) and config.target_speed >= 0
+    ):
         problems.append(f"target_speed {config.target_speed} must be >= 0 m/s (None: static)")
+    speeds = config.target_speed_range
+    if speeds is not None and not (
+        len(speeds) == 2 and all(np.isfinite(v) for v in speeds) and 0 <= speeds[0] <= speeds[1]
+    ):
+        problems.append(
+            f"target_speed_range {speeds} must be [low, high] m/s with 0 <= low <= high"
+        )
     if not (np.isfinite(config.target_turn_period) and config.target_turn_period > 0):
         problems.append(f"target_turn_period {config.target_turn_period} must be positive")
     if not all(np.isfinite(b) and b > 0 for b in config.target_motion_box):

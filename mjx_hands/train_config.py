@@ -54,6 +54,9 @@ class TrainConfig:
     """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
     and roll, drawn uniformly per episode (``EnvConfig.target_orientation_range``);
     None: the static orientation of the paper's training."""
+    target_speed_range: tuple[float, float] | None = None
+    """Partner model "motion": the target hand moves, each episode at a speed drawn
+    uniformly from [low, high] m/s (``EnvConfig.target_speed_range``); None: static."""
     target_position_noise: float = 0.0
     """Partner model "sensing": std (metres) of the observed target position's error,
     drawn every control step (``EnvConfig.target_position_noise``)."""
@@ -260,8 +263,9 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
     data = dict(data)
     data.setdefault("demos", "all")  # runs from before the setting used every demonstration
-    if data.get("target_orientation_range") is not None:
-        data["target_orientation_range"] = tuple(data["target_orientation_range"])
+    for key in ("target_orientation_range", "target_speed_range"):
+        if data.get(key) is not None:
+            data[key] = tuple(data[key])
     if data.get("profile", "project") == "paper":
         data["knobs"] = reward_params.RewardKnobs(**(data.get("knobs") or {}))
     else:

@@ -43,6 +43,7 @@ def env_config(config: TrainConfig):
         demos=config.demos,
         target_rotation_noise=config.target_rotation_noise,
         target_orientation_range=config.target_orientation_range,
+        target_speed_range=config.target_speed_range,
         target_position_noise=config.target_position_noise,
         action_delay=config.action_delay,
         physics=config.physics,

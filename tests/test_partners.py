@@ -162,3 +162,20 @@ def test_action_delay_applies_each_action_exactly_its_steps_later():
         env_lib.HandInteractionEnv(env_lib.EnvConfig(action_delay=-1))
     with pytest.raises(ValueError, match="target_position_noise -0.1 must be >= 0"):
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_position_noise=-0.1))
+
+
+def test_the_motion_partner_draws_each_episodes_speed_from_its_range():
+    env = env_lib.make_env(
+        "et", mocap_source="synthetic", physics="native", target_speed_range=(0.1, 0.3)
+    )
+    keys = jax.random.split(jax.random.PRNGKey(6), 512)
+    ep = jax.jit(jax.vmap(env.reset))(keys).info["episode"]
+    speed = np.linalg.norm(np.asarray(ep.target_velocity), axis=-1)
+    assert speed.min() >= 0.1 - 1e-6 and speed.max() <= 0.3 + 1e-6
+    np.testing.assert_allclose(speed.mean(), 0.2, atol=0.006)  # SE ~0.0026 at n = 512
+    np.testing.assert_allclose(speed.std(), 0.2 / np.sqrt(12), rtol=0.1)
+    # A speed given to reset_with (the robustness sweep) still wins.
+    given = jax.jit(env.reset_with)(keys[0], None, jnp.float32(0.05)).info["episode"]
+    assert np.linalg.norm(np.asarray(given.target_velocity)) == pytest.approx(0.05, abs=1e-6)
+    with pytest.raises(ValueError, match="must be \\[low, high\\] m/s"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(target_speed_range=(0.3, 0.1)))
