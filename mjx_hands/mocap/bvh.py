@@ -37,14 +37,6 @@ def _read(path: Path):
         raise MocapError(f"{path}: not a readable BVH file ({error})") from None
 
 
-def _to_xyz(angles: np.ndarray, order: str) -> np.ndarray:
-    """Channel angles (T, 3) in ``order`` as (T, 3) about x, y, z."""
-    out = np.empty_like(angles)
-    for k, axis in enumerate(order):
-        out[:, "XYZ".index(axis)] = angles[:, k]
-    return out
-
-
 def _hand(path: Path, hand: HandMapping, metres_per_unit: float) -> tuple[HandTrack, float]:
     """One hand's track from its skeleton file, and the file's frame rate."""
     bvh = _read(path)
@@ -74,7 +66,7 @@ def _hand(path: Path, hand: HandMapping, metres_per_unit: float) -> tuple[HandTr
             pos = pos + bvh.root_pos
         rot = rot @ skeleton.euler_matrices(angles[node.name], orders[node.name])
     palm_pos, palm_rot = palm_track(rot, pos, hand, metres_per_unit)
-    angle_of = {name: _to_xyz(a, orders[name]) for name, a in angles.items()}
+    angle_of = {name: skeleton.euler_by_axis(a, orders[name]) for name, a in angles.items()}
     joints = mapped_joints(str(path), hand, angle_of, bvh.frame_count)
     return HandTrack(palm_pos, palm_rot, joints), 1.0 / bvh.frame_time
 

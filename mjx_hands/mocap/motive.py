@@ -150,7 +150,7 @@ def _hand(path: Path, bodies: dict, hand: HandMapping, metres: float, frames: in
         parent, _ = body(bone.parent, f"the parent of {name}")
         relative = np.swapaxes(parent, -1, -2) @ child
         angles = skeleton.euler_angles(relative, bone.euler)
-        angle_of[name] = np.stack([angles[:, bone.euler.index(a)] for a in "XYZ"], -1)
+        angle_of[name] = skeleton.euler_by_axis(angles, bone.euler)
     return HandTrack(palm_pos, palm_rot, mapped_joints(str(path), hand, angle_of, frames))
 
 

@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-from mjx_hands.mocap.mapping import FORMATS, HandMapping, JointSource, Mapping
+from mjx_hands.mocap.mapping import FORMATS, Bone, HandMapping, JointSource, Mapping
 from mjx_hands.shadow_hand import HAND_JOINTS
 
 ROOT = "RightForearm"
@@ -75,6 +75,14 @@ def euler_angles(rot: np.ndarray, order: str) -> np.ndarray:
     from pybvh import rotations
 
     return rotations.rotmat_to_euler(rot, order.upper())
+
+
+def euler_by_axis(angles: np.ndarray, order: str) -> np.ndarray:
+    """Euler angles (T, 3) in ``order`` (e.g. "XZY") as (T, 3) about x, y, z."""
+    out = np.empty_like(angles)
+    for k, axis in enumerate(order):
+        out[:, "XYZ".index(axis)] = angles[:, k]
+    return out
 
 
 @functools.lru_cache(maxsize=1)
@@ -143,8 +151,6 @@ def mapping(fmt: str, windows: dict[str, tuple[int, int]], fps: float | None = N
                     joints.setdefault(joint, JointSource(prefix + node, axis))
         bones = {}
         if fmt == "motive":
-            from mjx_hands.mocap.mapping import Bone
-
             bones = {prefix + n: Bone(prefix + PARENT[n], EULER) for n, *_ in SKELETON}
         return HandMapping(
             prefix + PALM,
