@@ -300,7 +300,7 @@ def run(config, services) -> dict[str, Any]:
     final, _ = summarize(single, trajectory)  # the schema evaluate and DDPG report
     log.append({"epoch": float(len(log.rows) + 1), "train/env_steps": float(num_timesteps)} | final)
     log.close()
-    services.plot_success(log.rows, run_dir / "success.png", f"{config.task} ({config.algo})")
+    services.plot_success(log.rows, run_dir / "success.png", f"{config.env.task} ({config.algo})")
     print(
         f"{config.algo}: success at the end {final['eval/success_final']:.2f} "
         f"(some step {final['eval/success']:.2f})",

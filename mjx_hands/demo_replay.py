@@ -80,7 +80,9 @@ def replay(env: HandInteractionEnv, num_episodes: int, rng: jax.Array) -> dict:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
-    parser.add_argument("--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic"))
+    parser.add_argument(
+        "--mocap-source", default="auto", choices=("auto", "optitrack", "synthetic")
+    )
     parser.add_argument("--mocap", default=None, help="folder of the demonstrations")
     parser.add_argument("--episodes", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)
@@ -90,7 +92,7 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--episodes must be at least 1, got {args.episodes}")
     try:
         env = HandInteractionEnv(
-            env_lib.EnvConfig(task=args.task, mocap_source=args.mocap_source, mocap_path=args.mocap)
+            env_lib.EnvConfig(task=args.task, mocap_source=args.mocap_source, mocap=args.mocap)
         )
     except (ValueError, FileNotFoundError) as err:
         raise SystemExit(f"error: {err}") from err

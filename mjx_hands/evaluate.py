@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     metrics, profile = summarize(single, trajectory)
     summary = {
         "run_dir": str(run_dir),
-        "task": config.task,
+        "task": config.env.task,
         "checkpoint": {
             "kind": "best" if args.best else "latest" if args.step is None else "step",
             "epoch": epoch,
@@ -114,11 +114,11 @@ def main(argv: list[str] | None = None) -> int:
         summary["contact_profile"] = profile
         plot_path = run_dir / "contact_profile.png"
         contact_profile.plot(
-            trajectory["contacts"], profile, plot_path, config.task, single.config.control_dt
+            trajectory["contacts"], profile, plot_path, config.env.task, single.config.control_dt
         )
     (run_dir / "eval.json").write_text(json.dumps(summary, indent=2))
     print(
-        f"{config.task}: success at the end {metrics['eval/success_final']:.3f} (at some "
+        f"{config.env.task}: success at the end {metrics['eval/success_final']:.3f} (at some "
         f"step {metrics['eval/success']:.3f}), mean return {metrics['eval/episode_return']:.2f} "
         f"over {args.episodes} episodes ({summary['checkpoint']['kind']} checkpoint, epoch {epoch})"
     )

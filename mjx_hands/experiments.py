@@ -72,12 +72,12 @@ def members(grid: GridConfig) -> list[tuple[str, Any]]:
     run_dir = Path(base.run_dir)
     out = []
     for variant in grid.variants:
-        reward, imitation = VARIANTS[variant].reward, VARIANTS[variant].imitation
+        chosen = VARIANTS[variant]
+        env = dataclasses.replace(base.env, reward=chosen.reward, imitation=chosen.imitation)
         for seed in range(base.seed, base.seed + grid.seeds):
             config = dataclasses.replace(
                 base,
-                reward=reward,
-                imitation=imitation,
+                env=env,
                 seed=seed,
                 run_dir=str(run_dir / variant / f"seed{seed}"),
             )
@@ -96,7 +96,7 @@ def _check_grid(grid: GridConfig) -> None:
         problems.append(f"--variants repeats a variant: {' '.join(grid.variants)}")
     if grid.seeds < 1:
         problems.append(f"--seeds must be positive, got {grid.seeds}")
-    if base.reward != "full" or not base.imitation:
+    if base.env.reward != "full" or not base.env.imitation:
         problems.append("--reward/--no-imitation do not apply to a grid; name --variants instead")
     if base.algo in learners.REGISTRY and not learners.entry(base.algo).in_training_loop:
         problems.append(
@@ -131,7 +131,7 @@ def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any
     pairs = members(grid)
     run_dir = Path(grid.train.run_dir)
     record = {
-        "task": grid.train.task,
+        "task": grid.train.env.task,
         "variants": list(grid.variants),
         "seeds": grid.seeds,
         "members": [
@@ -154,7 +154,7 @@ def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any
             f"{run_dir} already holds a grid; pass --resume to continue it or choose another --run-dir"
         )
     print(
-        f"grid: {grid.train.task}, {len(grid.variants)} variants x {grid.seeds} seeds = "
+        f"grid: {grid.train.env.task}, {len(grid.variants)} variants x {grid.seeds} seeds = "
         f"{len(pairs)} runs trained together",
         file=out,
         flush=True,

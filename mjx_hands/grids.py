@@ -35,7 +35,8 @@ def load_grid(grid_dir: Path) -> dict[str, Any]:
         metrics = Path(grid_dir) / m["run_dir"] / "metrics.csv"
         rows = read_rows(metrics) if metrics.is_file() else []
         loaded.append(m | {"evals": [r for r in rows if HEADLINE in r]})
-    profile = record.get("train", {}).get("profile", "project")
+    train = record.get("train", {})
+    profile = train.get("env", train).get("profile", "project")  # flat before env was its own
     for m in loaded:
         m["source"] = str(grid_dir)
     return {"task": record["task"], "profile": profile, "dir": str(grid_dir), "members": loaded}

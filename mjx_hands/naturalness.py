@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         metrics = policy_metrics(single, loaded.act, args.episodes, args.seed)
         per_policy.append(
             {
-                "task": config.task,
+                "task": config.env.task,
                 "label": entry["label"],
                 "run_dir": str(entry["run_dir"]),
                 "epoch": epoch,

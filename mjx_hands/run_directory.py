@@ -236,8 +236,9 @@ class RunDirectory:
         if self.log is None:
             return
         self.log.close()
-        title = f"{self.config.task} ({self.config.algo}, {self.config.reward}"
-        title += ")" if self.config.imitation else ", no imitation)"
+        env = self.config.env
+        title = f"{env.task} ({self.config.algo}, {env.reward}"
+        title += ")" if env.imitation else ", no imitation)"
         plot_success(self.log.rows, self.path / "success.png", title)
 
     def summary(self, stop_reason: str, start_epoch: int) -> dict[str, Any]:

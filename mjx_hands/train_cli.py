@@ -55,13 +55,14 @@ def default_config(argv: list[str]):
 def preset_default(argv: list[str]):
     """The preset --preset names (auto by default) for the profile --profile names and
     the learner --algo names (default: the profile's, ``RECOMMENDED_ALGO``)."""
-    from mjx_hands import profiles, train_config
+    from mjx_hands import profiles, tasks, train_config
+    from mjx_hands.env_config import EnvConfig
 
     profile = profiles.check(option(argv, "--profile") or "project")
+    task = option(argv, "--task") or "handshake"
     return train_config.preset(
         option(argv, "--preset") or "auto",
-        profile=profile,
-        task=option(argv, "--task") or "handshake",
+        env=EnvConfig(task=task if task in tasks.TASKS else "handshake", profile=profile),
         algo=option(argv, "--algo") or train_config.RECOMMENDED_ALGO[profile],
     )
 

@@ -7,16 +7,17 @@ import dataclasses
 import json
 import math
 import time
+import typing
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import jax
+import tyro
 
 from mjx_hands import checkpoint, learners, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.brax_agents import PPOConfig, SACConfig
-
-Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
+from mjx_hands.env_config import EnvConfig, reward_weights
 
 
 @dataclasses.dataclass(frozen=True)
@@ -24,50 +25,11 @@ class TrainConfig:
     """Train a hand-interaction policy with the project's DDPG learner (``--algo``: the
     paper's, with LayerNorm, or with TD3's additions) or Brax's SAC/PPO for comparison."""
 
-    task: Task = "handshake"
-    """Interaction to learn."""
-    profile: profiles.Profile = "project"
-    """Environment and learner: 'project' (the project's observation, contact rule,
-    weights and target box; ``--algo ddpg-ln`` by default) or 'paper' (the authors'
-    environment: their observation, touch sensors, per-task and per-variant weights, reward
-    <= 0 with the critic target clipped to [-T, 0], target boxes, and their DDPG's replay
-    ratio, buffer and 50-epoch budget). See ``mjx_hands.profiles``."""
-    reward: Literal["full", "baseline1", "baseline2"] = "full"
-    """Reward: the paper's full reward, baseline1 (palm position only), baseline2
-    (no contact term)."""
-    imitation: bool = True
-    """Imitation terms r_pI, r_αI (time-indexed imitation of the demonstration)."""
-    knobs: reward_params.RewardKnobs = reward_params.RewardKnobs()
-    """The reward's six knobs (``--knobs.K-p 4`` ...); unset ones take the task's own
-    (``tasks.TaskSpec.reward_knobs``: the handshake the authors' K_p 4, K_c 0.5, K_alpha
-    0; the clap and E.T. K_p 1, K_c 0.2, K_alpha 0.1). config.json records every value.
-    Under ``--profile paper`` unset knobs take the authors' config of each variant, and
-    set ones override every variant's."""
-    mocap: str | None = None
-    """Folder of demonstrations; default: the authors' recordings in
-    ../shared/mocap/drl_handshake when present, else the project's mocap_data/."""
-    mocap_source: Literal["auto", "optitrack", "synthetic"] = "auto"
-    """Which demonstrations to read."""
-    demos: Literal["authors", "all"] = "authors"
-    """Of the recordings, the demonstrations the authors trained on, or all of them."""
-    target_orientation_range: tuple[float, float, float] | None = None
-    """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
-    and roll, drawn uniformly per episode (``EnvConfig.target_orientation_range``);
-    None: the static orientation of the paper's training."""
-    target_speed_range: tuple[float, float] | None = None
-    """Partner model "motion": the target hand moves, each episode at a speed drawn
-    uniformly from [low, high] m/s (``EnvConfig.target_speed_range``); None: static."""
-    target_position_noise: float = 0.0
-    """Partner model "sensing": std (metres) of the observed target position's error,
-    drawn every control step (``EnvConfig.target_position_noise``)."""
-    action_delay: int = 0
-    """Partner model "actuation": control steps between an action and the actuators
-    (``EnvConfig.action_delay``)."""
-    target_rotation_noise: float = 0.0
-    """Std (radians) of a random per-episode rotation of the target hand."""
-    physics: Literal["auto", "mjx", "native"] = "auto"
-    """Physics: MJX (accelerators), native C MuJoCo on every CPU core (>10x MJX's speed
-    there) or auto (native on CPUs, MJX elsewhere)."""
+    env: Annotated[EnvConfig, tyro.conf.arg(name="")] = EnvConfig()
+    """The environment (``mjx_hands.env_config.EnvConfig``): its fields are the command
+    line's ``--task``, ``--profile``, ``--reward``, ``--knobs.*``, ``--mocap*``, partner
+    models, ``--physics``, ``--scene.*`` ... Under ``--profile paper`` the learner's sizes
+    and budget are the authors' (``mjx_hands.profiles``; 'project' trains ``ddpg-ln``)."""
     algo: str = "ddpg"
     """Learner, by its name in ``mjx_hands.learners``: ddpg (the paper's DDPG), ddpg-ln
     (the same with LayerNorm, the evidence's pick), td3 (TD3's additions and 3-step
@@ -135,23 +97,17 @@ class TrainConfig:
             math.isfinite(self.replay_ratio) and self.replay_ratio > 0
         ):
             problems.append(f"--replay-ratio must be a positive number, got {self.replay_ratio}")
-        if not (math.isfinite(self.target_rotation_noise) and self.target_rotation_noise >= 0):
-            problems.append(
-                f"--target-rotation-noise must be a finite number >= 0, got "
-                f"{self.target_rotation_noise}"
-            )
         if self.algo not in learners.REGISTRY:
             problems.append(
                 f"--algo {self.algo!r} is not a registered learner; expected one of "
                 f"{', '.join(learners.REGISTRY)}"
             )
-        if self.task in tasks.TASKS:  # an unknown task is tyro's (or the env's) to name
-            try:
-                reward_params.task_weights(self.task, self.knobs)
-            except (ValueError, TypeError) as err:
-                problems.append(f"--knobs: {err}")
-        if self.mocap is not None and not Path(self.mocap).is_dir():
-            problems.append(f"--mocap {self.mocap}: no such folder")
+        try:
+            reward_weights(self.env)
+        except (ValueError, TypeError) as err:
+            problems.append(f"--knobs: {err}")
+        if self.env.mocap is not None and not Path(self.env.mocap).is_dir():
+            problems.append(f"--mocap {self.env.mocap}: no such folder")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -174,8 +130,9 @@ paper's DDPG."""
 def preset(kind: str, **overrides: Any) -> TrainConfig:
     """Default config of a preset: 'cpu' (2 cores, under an hour) or 'gpu' (thousands of envs).
 
-    With ``profile='paper'`` the learner's sizes and budget are the authors'
-    (:func:`mjx_hands.profiles.paper_learner` of ``task``) on either preset, evaluation
+    ``overrides`` are ``TrainConfig`` fields (the environment as ``env=EnvConfig(...)``).
+    With ``env.profile='paper'`` the learner's sizes and budget are the authors'
+    (:func:`mjx_hands.profiles.paper_learner` of ``env.task``) on either preset, evaluation
     batch and checkpointing the preset's."""
     if kind == "auto":
         kind = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "cpu"
@@ -216,8 +173,9 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
     else:
         raise ValueError(f"unknown preset {kind!r}; expected auto, cpu or gpu")
     base = dataclasses.replace(base, sac=SACConfig.like(base.ddpg), ppo=PPOConfig.like(base.ddpg))
-    if overrides.get("profile") == "paper":
-        paper = profiles.paper_learner(overrides.get("task", base.task))
+    env = overrides.get("env", base.env)
+    if env.profile == "paper":
+        paper = profiles.paper_learner(env.task)
         base = dataclasses.replace(
             base,
             **{k: v for k, v in paper.items() if k != "ddpg"},
@@ -247,11 +205,13 @@ def read_config_json(path: Path) -> dict[str, Any]:
 
 
 def resolved(config: TrainConfig) -> TrainConfig:
-    """``config`` with every reward knob a number (the task's own where unset); under the
-    paper profile unset knobs stay unset (each variant has the authors' own)."""
-    if config.profile == "paper":
+    """``config`` with every reward knob a number, as :func:`env_config.reward_weights`
+    resolves them (the task's own where unset); under the paper profile unset knobs stay
+    unset (each variant has the authors' own)."""
+    if config.env.profile == "paper":
         return config
-    return dataclasses.replace(config, knobs=reward_params.task_knobs(config.task, config.knobs))
+    knobs = reward_params.knobs_of(reward_weights(config.env))
+    return dataclasses.replace(config, env=dataclasses.replace(config.env, knobs=knobs))
 
 
 def config_to_json(config: TrainConfig) -> dict[str, Any]:
@@ -261,34 +221,53 @@ def config_to_json(config: TrainConfig) -> dict[str, Any]:
 
 
 def config_from_json(data: dict[str, Any]) -> TrainConfig:
+    """The config a run's config.json (or a grid record's ``train``) holds. Settings added
+    since it was written take their defaults; a key this version does not know is a
+    ``TypeError`` naming it."""
     data = dict(data)
-    data.setdefault("demos", "all")  # runs from before the setting used every demonstration
-    for key in ("target_orientation_range", "target_speed_range"):
-        if data.get(key) is not None:
-            data[key] = tuple(data[key])
-    if data.get("profile", "project") == "paper":
-        data["knobs"] = reward_params.RewardKnobs(**(data.get("knobs") or {}))
+    if "env" not in data:  # runs from before the environment was a field of its own
+        names = {f.name for f in dataclasses.fields(EnvConfig)}
+        data["env"] = {k: data.pop(k) for k in list(data) if k in names}
+        data["env"].setdefault("demos", "all")  # before the setting, every demonstration
+    env = dict(data["env"])
+    if env.get("profile", "project") == "paper":
+        env["knobs"] = reward_params.RewardKnobs(**(env.get("knobs") or {}))
     else:
-        data["knobs"] = _knobs_from_json(data.get("knobs"), data.get("task", "handshake"))
-    ddpg = dict(data.pop("ddpg"))
-    for key in ("hidden_sizes", "target_clip", "value_range"):
-        if ddpg.get(key) is not None:
-            ddpg[key] = tuple(ddpg[key])
-    ddpg = DDPGConfig(**ddpg)
+        env["knobs"] = _knobs_from_json(env.get("knobs"), env.get("task", "handshake"))
+    data["env"] = dataclass_from_json(EnvConfig, env)
+    ddpg = dataclass_from_json(DDPGConfig, data.pop("ddpg"))
     # Runs from before SAC and PPO had settings of their own trained with DDPG's sizes.
-    own = {"sac": SACConfig.like(ddpg), "ppo": PPOConfig.like(ddpg)}
     for name, kind in (("sac", SACConfig), ("ppo", PPOConfig)):
-        if name in data:
-            fields = dict(data.pop(name))
-            fields["hidden_sizes"] = tuple(fields.get("hidden_sizes", (256, 256, 256)))
-            own[name] = kind(**fields)
-    return TrainConfig(**data, ddpg=ddpg, **own)
+        data[name] = dataclass_from_json(kind, data[name]) if name in data else kind.like(ddpg)
+    return dataclass_from_json(TrainConfig, data | {"ddpg": ddpg})
+
+
+def dataclass_from_json(kind: type, data: dict[str, Any]):
+    """A ``kind`` dataclass from its ``dataclasses.asdict`` JSON form: nested dataclasses
+    from their dicts, lists back to tuples; fields absent take their defaults."""
+    if not isinstance(data, dict):
+        return data  # already built
+    fields = {f.name: f for f in dataclasses.fields(kind)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise TypeError(f"{kind.__name__} has no setting {', '.join(unknown)}")
+    hints = typing.get_type_hints(kind)
+    values = {}
+    for name, value in data.items():
+        if dataclasses.is_dataclass(hints[name]) and isinstance(value, dict):
+            value = dataclass_from_json(hints[name], value)
+        elif isinstance(value, list):
+            value = tuple(value)
+        values[name] = value
+    return kind(**values)
 
 
 def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
     """Knobs as config.json (or a checkpoint's metadata) holds them. Runs from before
     they were recorded trained with ``RewardWeights``' defaults; runs started on
     2026-12-02 may name a set ("authors" or "project")."""
+    if isinstance(value, reward_params.RewardKnobs):
+        value = dataclasses.asdict(value)
     if value is None or value == "project":
         return reward_params.knobs_of(reward_params.RewardWeights())
     if value == "authors":
@@ -297,17 +276,20 @@ def _knobs_from_json(value, task: str) -> reward_params.RewardKnobs:
 
 
 # Settings a resumed run must share with its checkpoint: they fix the task, the physics,
-# the networks' and buffers' shapes. Everything else (learning rates, budget) may change.
+# the networks' and buffers' shapes. Everything else (learning rates, budget, the
+# partner models: a curriculum changes them between resumes) may change.
 RESUME_FIXED = (
-    "task",
-    "profile",
-    "reward",
-    "imitation",
-    "knobs",
-    "mocap_source",
-    "mocap",
-    "demos",
-    "physics",
+    "env.task",
+    "env.profile",
+    "env.reward",
+    "env.imitation",
+    "env.knobs",
+    "env.mocap_source",
+    "env.mocap",
+    "env.demos",
+    "env.physics",
+    "env.control_dt",
+    "env.scene",
     "num_envs",
     "algo",
     "ddpg.hidden_sizes",
@@ -318,9 +300,20 @@ RESUME_FIXED = (
     "ddpg.replay_capacity",
 )
 
-MEMBER_FIELDS = ("seed", "reward", "imitation", "run_dir")
+MEMBER_FIELDS = ("seed", "env.reward", "env.imitation", "run_dir")
 """What members of one population may differ in; every other setting is shared (one
 program): seeds, and reward variants as data."""
+
+
+def dotted(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A nested JSON dict flattened to ``{"env.task": ..., "ddpg.batch_size": ...}``."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out |= dotted(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -> None:
@@ -328,8 +321,8 @@ def check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -
     # Through the dataclass: settings added since the run started take their defaults.
     saved = json.loads(json.dumps(config_to_json(config_from_json(saved))))
 
-    def get(tree, dotted):
-        for part in dotted.split("."):
+    def get(tree, key):
+        for part in key.split("."):
             tree = tree.get(part) if isinstance(tree, dict) else None
         return tree
 
@@ -344,7 +337,9 @@ def check_resumable(saved: dict[str, Any], config: TrainConfig, run_dir: Path) -
 def check_population(configs: list[TrainConfig]) -> None:
     if not configs:
         raise ValueError("a population needs at least one run config")
-    shared = lambda c: {k: v for k, v in config_to_json(c).items() if k not in MEMBER_FIELDS}
+    shared = lambda c: {
+        k: v for k, v in dotted(config_to_json(c)).items() if k not in MEMBER_FIELDS
+    }
     for config in configs[1:]:
         a, b = shared(configs[0]), shared(config)
         if a != b:
@@ -366,7 +361,7 @@ def check_population(configs: list[TrainConfig]) -> None:
 def run_dir_path(config: TrainConfig) -> Path:
     """``--run-dir``, or runs/<task>-<algo>-<time> when none is given."""
     return Path(
-        config.run_dir or f"runs/{config.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
+        config.run_dir or f"runs/{config.env.task}-{config.algo}-{time.strftime('%Y%m%d-%H%M%S')}"
     )
 
 

@@ -27,29 +27,6 @@ from mjx_hands.train_config import TrainConfig, check_population, program_config
 
 
 # ---------------------------------------------------------------- build
-def env_config(config: TrainConfig):
-    """The environment config of a run: the one place a ``TrainConfig`` becomes an
-    ``EnvConfig``."""
-    from mjx_hands import env as env_lib
-
-    return env_lib.EnvConfig(
-        task=config.task,
-        profile=config.profile,
-        reward=config.reward,
-        imitation=config.imitation,
-        knobs=config.knobs,
-        mocap_source=config.mocap_source,
-        mocap_path=config.mocap,
-        demos=config.demos,
-        target_rotation_noise=config.target_rotation_noise,
-        target_orientation_range=config.target_orientation_range,
-        target_speed_range=config.target_speed_range,
-        target_position_noise=config.target_position_noise,
-        action_delay=config.action_delay,
-        physics=config.physics,
-    )
-
-
 def make_envs(config: TrainConfig, num_devices: int):
     """(train env, eval env, single env) with per-device batch sizes."""
     from mjx_hands import env as env_lib
@@ -60,7 +37,7 @@ def make_envs(config: TrainConfig, num_devices: int):
                 f"--{name.replace('_', '-')}={getattr(config, name)} is not divisible by "
                 f"the {num_devices} devices"
             )
-    single = env_lib.HandInteractionEnv(env_config(config))
+    single = env_lib.HandInteractionEnv(config.env)
     train_env = env_lib.BatchedEnv(single, config.num_envs // num_devices)
     eval_env = env_lib.BatchedEnv(single, config.eval_envs // num_devices)
     return train_env, eval_env, single
@@ -184,11 +161,12 @@ class TrainingDiverged(RuntimeError):
 def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None:
     """``member_info`` giving each member its reward variant as data, or None when all
     members use the environment's own variant (``configs[0]``'s)."""
-    if all((c.reward, c.imitation) == (configs[0].reward, configs[0].imitation) for c in configs):
+    variant = lambda c: (c.env.reward, c.env.imitation)
+    if all(variant(c) == variant(configs[0]) for c in configs):
         return None
     from mjx_hands import env as env_lib
 
-    weights = [single.variant_for(env_lib.reward_weights(env_config(c))) for c in configs]
+    weights = [single.variant_for(env_lib.reward_weights(c.env)) for c in configs]
     return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
 
 
@@ -275,7 +253,7 @@ def run_population(
     for r in runs:
         r.check()
     labels = labels or [str(r.path) for r in runs]
-    print(f"building the {config.task} environment and learner ...", file=out, flush=True)
+    print(f"building the {config.env.task} environment and learner ...", file=out, flush=True)
     algo, single = make_learner(config, env_factory=env_factory, population=configs)
     print(_setup_line(config, runs, algo, single, launched), file=out, flush=True)
     state = algo.init(np.stack([np.asarray(jax.random.PRNGKey(c.seed)) for c in configs]))
@@ -364,7 +342,7 @@ def _setup_line(config: TrainConfig, runs: list[RunDirectory], algo, single, lau
         else f"{len(runs)} runs in {os.path.commonpath([str(r.path) for r in runs])}"
     )
     return (
-        f"{config.task}: {single.describe()}, "
+        f"{config.env.task}: {single.describe()}, "
         f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
         f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
         f"run dir {where} ({time.perf_counter() - launched:.0f} s)"

@@ -11,7 +11,7 @@ import pytest
 from mujoco import mjx
 
 from mjx_hands import env as env_lib
-from mjx_hands import scene, train_config
+from mjx_hands import scene
 from mjx_hands import shadow_hand as sh
 
 
@@ -357,7 +357,7 @@ def test_target_tilt_angle_is_exact_or_gaussian_about_uniform_axes():
 
 
 def test_the_reward_is_given_one_way():
-    """Variant and imitation, or every knob as weights; both at once is refused."""
+    """Variant, imitation and knobs make the weights; unknown names are refused."""
     import dataclasses
 
     from mjx_hands import reward_params as rp
@@ -375,20 +375,21 @@ def test_the_reward_is_given_one_way():
     two = env_lib.EnvConfig(task="handshake", knobs=rp.RewardKnobs(K_p=2.0, K_pI=0.0))
     assert env_lib.reward_weights(two) == rp.RewardWeights(K_p=2.0, K_c=0.5, K_alpha=0.0, K_pI=0.0)
     assert rp.task_knobs("handclap") == rp.RewardKnobs(1.0, 0.1, 0.2, 0.0, 0.5, 0.5)
-    mine = rp.RewardWeights(K_p=2.0)
-    assert env_lib.reward_weights(env_lib.EnvConfig(weights=mine)) == mine
-    with pytest.raises(ValueError, match="give either weights or reward/imitation/knobs"):
-        env_lib.reward_weights(env_lib.EnvConfig(reward="baseline2", weights=mine))
+    # Names outside their vocabularies are refused where the config is made.
+    with pytest.raises(ValueError, match="unknown reward 'baseline3'; expected one of full, baseline1"):
+        env_lib.EnvConfig(reward="baseline3")
+    with pytest.raises(ValueError, match="unknown demos 'some'; expected one of authors, all"):
+        env_lib.EnvConfig(demos="some")
 
 
 def test_the_task_registry_is_what_every_module_reads():
     import typing
 
     import mjx_hands
-    from mjx_hands import mocap, reward_params, tasks
+    from mjx_hands import env_config, mocap, reward_params, tasks
 
     assert mjx_hands.TASKS == env_lib.TASKS == mocap.TASKS == tasks.TASKS
-    assert typing.get_args(train_config.Task) == tasks.TASKS
+    assert typing.get_args(env_config.Task) == tasks.TASKS
     for name in tasks.TASKS:
         spec = tasks.spec(name)
         assert reward_params.REQUIRED_CONTACTS[name] == spec.required_contacts

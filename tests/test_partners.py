@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from mjx_hands import env as env_lib
-from mjx_hands import spatial, train_config, training
+from mjx_hands import spatial, train_config
 
 HALF = (0.5, 0.3, 0.2)  # yaw, pitch, roll half-ranges, radians
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0], np.float32)
@@ -94,12 +94,14 @@ def test_the_orientation_partner_is_checked_and_recorded(tmp_path):
         env_lib.HandInteractionEnv(
             env_lib.EnvConfig(target_orientation_range=HALF, target_rotation_noise=0.1)
         )
-    config = train_config.TrainConfig(target_orientation_range=HALF, run_dir=str(tmp_path))
-    assert training.env_config(config).target_orientation_range == HALF
+    config = train_config.TrainConfig(
+        env=env_lib.EnvConfig(target_orientation_range=HALF), run_dir=str(tmp_path)
+    )
+    assert config.env.target_orientation_range == HALF
     data = json.loads(json.dumps(train_config.config_to_json(config)))
     back = train_config.config_from_json(data)
     assert back == train_config.resolved(config) and hash(back)  # a tuple again
-    assert dataclasses.replace(back, target_orientation_range=None) != back
+    assert dataclasses.replace(back.env, target_orientation_range=None) != back.env
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +162,7 @@ def test_action_delay_applies_each_action_exactly_its_steps_later():
         np.testing.assert_allclose(applied[k], np.asarray(env.ctrl_for(actions[k - 2])), atol=1e-6)
     with pytest.raises(ValueError, match="action_delay -1 must be a whole number"):
         env_lib.HandInteractionEnv(env_lib.EnvConfig(action_delay=-1))
-    with pytest.raises(ValueError, match="target_position_noise -0.1 must be >= 0"):
+    with pytest.raises(ValueError, match="target_position_noise -0.1 must be a finite number >= 0"):
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_position_noise=-0.1))
 
 

@@ -258,8 +258,10 @@ import jax, numpy as np
 from mjx_hands import train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 assert len(jax.local_devices()) == 2, jax.local_devices()
+from mjx_hands.env_config import EnvConfig
 config = train_config.TrainConfig(
-    task="handshake", mocap_source="synthetic", physics="native", num_envs=8, eval_envs=8,
+    env=EnvConfig(task="handshake", mocap_source="synthetic", physics="native"),
+    num_envs=8, eval_envs=8,
     epochs=1, eval_every=1, run_dir=sys.argv[1],
     ddpg=DDPGConfig(hidden_sizes=(32, 32), batch_size=32, replay_capacity=1_024,
                     min_replay_size=64, unroll_length=4, updates_per_iteration=2,

@@ -99,7 +99,7 @@ def test_reward_variants_are_data_and_members_are_independent():
 
     pair, history_pair, evals_pair = population(members)
     alone, history_alone, evals_alone = population(members[3:])
-    assert (members[3].reward, members[3].seed) == ("baseline2", 1)
+    assert (members[3].env.reward, members[3].seed) == ("baseline2", 1)
     # The neighbours were rewarded differently (baseline 2: no contact term).
     assert history_pair[-1][3]["env/reward/contact"] == 0.0
     assert history_pair[-1][1]["env/reward/contact"] >= 0.0
@@ -138,7 +138,7 @@ def test_a_grid_runs_resumes_and_reports_end_to_end(tmp_path, capfd):
     for m in record["members"]:
         run_dir = grid / m["run_dir"]
         config = json.loads((run_dir / "config.json").read_text())
-        assert (config["seed"], config["reward"]) == (m["seed"], m["variant"])
+        assert (config["seed"], config["env"]["reward"]) == (m["seed"], m["variant"])
         rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
         assert [r["epoch"] for r in rows] == ["1.0", "2.0"]
         assert (run_dir / "best").is_dir() and (run_dir / "success.png").is_file()
@@ -404,7 +404,7 @@ def test_grid_members_differ_only_in_seed_and_variant():
     grid = experiments.GridConfig(variants=("full", "no_imitation"), seeds=2,
                      train=dataclasses.replace(train_config.preset("cpu"), run_dir="g", seed=3))
     pairs = experiments.members(grid)
-    assert [(v, c.seed, c.reward, c.imitation, c.run_dir) for v, c in pairs] == [
+    assert [(v, c.seed, c.env.reward, c.env.imitation, c.run_dir) for v, c in pairs] == [
         ("full", 3, "full", True, "g/full/seed3"),
         ("full", 4, "full", True, "g/full/seed4"),
         ("no_imitation", 3, "full", False, "g/no_imitation/seed3"),
@@ -444,7 +444,11 @@ def test_a_diverged_member_stops_alone(tmp_path, capsys):
     base = train_config.TrainConfig(num_envs=16, eval_envs=16, epochs=3, eval_every=1, ddpg=POINT)
     configs = [
         dataclasses.replace(base, run_dir=str(tmp_path / "ok")),
-        dataclasses.replace(base, reward="baseline1", run_dir=str(tmp_path / "nan")),
+        dataclasses.replace(
+            base,
+            env=dataclasses.replace(base.env, reward="baseline1"),
+            run_dir=str(tmp_path / "nan"),
+        ),
     ]
     summaries = training.run_population(configs, out=io.StringIO(), env_factory=_scaled_factory)
     assert "the other members train on" in capsys.readouterr().err

@@ -15,6 +15,7 @@ import pytest
 
 from mjx_hands import physics, profiles, reward_params, rewards, scene, train_config
 from mjx_hands import shadow_hand as sh
+from mjx_hands.env_config import EnvConfig
 
 # (W_pos, W_f, W_ang, W_ipos, W_iang) of config/<task>.yaml, <task>_baseline1/2.yaml.
 AUTHORS = {
@@ -105,7 +106,7 @@ def test_paper_reward_is_never_positive_and_imitation_is_absolute():
 
 @pytest.mark.parametrize("task", ["handshake", "handclap", "et"])
 def test_paper_learner_is_the_authors_ddpg_cycle_and_budget(task):
-    config = train_config.preset("cpu", profile="paper", task=task)
+    config = train_config.preset("cpu", env=EnvConfig(profile="paper", task=task))
     d, T = config.ddpg, EPISODE[task]
     assert config.algo == "ddpg" and not d.layer_norm
     assert d.target_clip == (-T, 0.0)  # clip_return = 1/(1-gamma) = T, clip_pos_returns

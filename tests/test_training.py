@@ -29,6 +29,7 @@ from compiles import counting_traces
 from mjx_hands import brax_agents, checkpoint, reward_params, run_directory, train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.env import BatchedEnv
+from mjx_hands.env_config import EnvConfig
 from mjx_hands.point_reach import PointReach
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -134,18 +135,23 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
     assert train_config.config_from_json(config) == train_config.resolved(expected)
     # Every reward knob is recorded as a number; runs from before read as the defaults
     # they trained with, and a named set (grids of 2026-12-02) as its numbers.
-    recorded = train_config.config_from_json(config).knobs
+    recorded = train_config.config_from_json(config).env.knobs
     assert recorded == reward_params.task_knobs("handshake") and recorded.K_p == 4.0
-    older = {k: v for k, v in config.items() if k != "knobs"}
+    # Runs from before the environment was a field of its own hold its settings flat.
+    flat = {k: v for k, v in config.items() if k != "env"} | config["env"]
+    assert train_config.config_from_json(flat) == train_config.config_from_json(config)
+    older = {k: v for k, v in flat.items() if k != "knobs"}
     defaults = reward_params.RewardWeights()
-    assert train_config.config_from_json(older).knobs == reward_params.RewardKnobs(
+    assert train_config.config_from_json(older).env.knobs == reward_params.RewardKnobs(
         **{name: getattr(defaults, name) for name in reward_params.KNOB_NAMES}
     )
-    named = config | {"knobs": "authors", "task": "et"}
-    assert train_config.config_from_json(named).knobs.K_p == 6.0
+    named = flat | {"knobs": "authors", "task": "et"}
+    assert train_config.config_from_json(named).env.knobs.K_p == 6.0
+    with pytest.raises(TypeError, match="EnvConfig has no setting frobnicate"):
+        train_config.config_from_json(config | {"env": config["env"] | {"frobnicate": 1}})
     with pytest.raises(ValueError, match="--knobs: K_alpha must be"):
         dataclasses.replace(
-            train_config.TrainConfig(), knobs=reward_params.RewardKnobs(K_alpha=-1.0)
+            train_config.TrainConfig(), env=EnvConfig(knobs=reward_params.RewardKnobs(K_alpha=-1.0))
         )
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert "eval/success" in rows[0] and len(rows) == 3
@@ -367,7 +373,7 @@ def test_train_py_end_to_end_on_the_hand_task(hand_run):
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     assert "epoch    2/2" in result.stdout and "eval success" in result.stdout
     config = json.loads((run_dir / "config.json").read_text())
-    assert config["task"] == "handshake" and config["num_envs"] == 8
+    assert config["env"]["task"] == "handshake" and config["num_envs"] == 8
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert len(rows) == 3 and "eval/success" in rows[0]
     assert checkpoint.latest_step(run_dir / "checkpoints") == 2
@@ -622,7 +628,9 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
     assert resumed == train_config.resolved(config)  # tyro applies --epochs on top
     fresh = train_cli.default_config(["--run-dir", str(tmp_path / "new"), "--preset", "cpu"])
-    assert fresh == train_config.preset("cpu", profile="project", algo="ddpg-ln")  # recommended
+    assert fresh == train_config.preset(
+        "cpu", env=EnvConfig(profile="project"), algo="ddpg-ln"
+    )  # recommended
 
 
 def test_brax_wrapper_restarts_episodes_with_fresh_randomisation():
@@ -850,7 +858,7 @@ def _refused(argv: list[str], capsys) -> str:
     "args, message",
     [
         (["--ddpg.hidden-sizes", "0"], "hidden_sizes=(0,)"),
-        (["--target-rotation-noise", "nan"], "--target-rotation-noise must be a finite number"),
+        (["--target-rotation-noise", "nan"], "target_rotation_noise nan must be a finite number"),
         (["--ddpg.actor-learning-rate", "inf"], "actor_learning_rate=inf"),
         (["--max-minutes", "nan"], "--max-minutes must be a positive number"),
         (["--checkpoint-every", "0"], "--checkpoint-every must be positive"),

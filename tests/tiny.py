@@ -11,6 +11,7 @@ import pytest
 
 from mjx_hands import train_config
 from mjx_hands.agents.ddpg import DDPGConfig
+from mjx_hands.env_config import EnvConfig
 
 HAND_DDPG = DDPGConfig(
     hidden_sizes=(32, 32),
@@ -23,9 +24,7 @@ HAND_DDPG = DDPGConfig(
 )
 
 HAND = train_config.TrainConfig(
-    task="handshake",
-    mocap_source="synthetic",
-    physics="native",
+    env=EnvConfig(task="handshake", mocap_source="synthetic", physics="native"),
     num_envs=16,
     eval_envs=16,
     eval_every=1,
@@ -42,7 +41,8 @@ def hand_config(**overrides) -> train_config.TrainConfig:
 
 def hand_cli_args() -> list[str]:
     """:data:`HAND` as train.py / experiments command-line flags."""
-    args = ["--task", HAND.task, "--mocap-source", HAND.mocap_source, "--physics", HAND.physics]
+    env = HAND.env
+    args = ["--task", env.task, "--mocap-source", env.mocap_source, "--physics", env.physics]
     args += ["--num-envs", str(HAND.num_envs), "--eval-envs", str(HAND.eval_envs)]
     args += ["--eval-every", str(HAND.eval_every)]
     args += ["--ddpg.hidden-sizes", *map(str, HAND_DDPG.hidden_sizes)]

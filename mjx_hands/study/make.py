@@ -105,7 +105,7 @@ def make(args: MakeArgs, log=None) -> layout.Study:
         for policy_name, run_dir in zip(layout.POLICIES, args.runs[index : index + 2]):
             policy = policies.load_policy(Path(run_dir), eval_envs=1, best=args.best)
             loaded[policy_name] = (policy.config, policy.single, policy.act)
-        tasks = {config.task for config, _, _ in loaded.values()}
+        tasks = {config.env.task for config, _, _ in loaded.values()}
         if len(tasks) > 1:
             raise ValueError(f"--runs {args.runs[index : index + 2]} are of different tasks")
         task = tasks.pop()

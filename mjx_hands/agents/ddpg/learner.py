@@ -226,13 +226,8 @@ class DDPG:
             devices=devices,
         )
         self.env = env
-        self.eval_env = self.population.eval_env
         self.config = config
         self.episode_length = episode_length
-        self.members = members
-        self.member_info = member_info
-        self.devices = self.population.devices
-        self.num_devices = self.population.num_devices
         for name in ("batch_size", "replay_capacity", "min_replay_size"):
             if getattr(config, name) % self.num_devices:
                 raise ValueError(
@@ -265,6 +260,27 @@ class DDPG:
         self._epoch = self.population.pmap(self._epoch_device, donate_argnums=0)
         self._evaluate = self.population.evaluation(self.policy)
         self.to_devices = self.population.to_devices
+
+    # The population's layout, read from it (one source: the runner every learner reuses).
+    @property
+    def eval_env(self):
+        return self.population.eval_env
+
+    @property
+    def members(self) -> int:
+        return self.population.members
+
+    @property
+    def member_info(self) -> dict[str, Any] | None:
+        return self.population.member_info
+
+    @property
+    def devices(self) -> list:
+        return self.population.devices
+
+    @property
+    def num_devices(self) -> int:
+        return self.population.num_devices
 
     # ------------------------------------------------------------- networks
     def normalize(self, learner: LearnerState, obs: jax.Array) -> jax.Array:

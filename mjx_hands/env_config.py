@@ -1,0 +1,211 @@
+"""The configuration of a hand-interaction environment (:class:`EnvConfig`), its checks
+and the reward weights it asks for.
+
+A light module (no MJX, no compiled programs): the training config holds an
+``EnvConfig`` as its ``env`` field, so the command line's ``--task``, ``--profile``,
+``--knobs.*``, partner options ... are this dataclass's fields
+(:mod:`mjx_hands.train_config`); :class:`mjx_hands.env.HandInteractionEnv` is built from
+it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+
+from mjx_hands import profiles, reward_params, scene, tasks
+
+Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
+DEMO_SETS = ("authors", "all")
+"""``EnvConfig.demos``: the demonstrations the authors trained on, or all recorded."""
+MOCAP_SOURCES = ("auto", "optitrack", "synthetic")
+PHYSICS = ("auto", "mjx", "native")
+"""``EnvConfig.physics``: MJX, native C MuJoCo, or auto (native on CPUs); ``mjx_hands.physics``."""
+
+
+def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
+    """The reward weights ``config`` asks for: its profile's weights of its task's
+    variant (``reward``, ``imitation``), ``knobs`` set over them. The one place knobs
+    become weights: the environment, a training config's checks and its config.json all
+    read this."""
+    return profiles.reward_weights(
+        config.profile, config.task, config.reward, config.imitation, config.knobs
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Everything that defines an environment instance (all static under jit)."""
+
+    task: Task = "handshake"
+    """Interaction to learn (a name in ``mjx_hands.tasks``)."""
+    profile: profiles.Profile = "project"
+    """'project' (the project's observation, contact rule, weights and target box;
+    training with ``ddpg-ln`` by default) or 'paper' (the authors' environment: their
+    observation, touch sensors, per-task and per-variant weights, reward <= 0 with the
+    critic target clipped to [-T, 0], target boxes, and their DDPG's replay ratio, buffer
+    and 50-epoch budget). See ``mjx_hands.profiles``."""
+    reward: Literal[tuple(reward_params.REWARD_FORMS)] = "full"
+    """Reward form (``reward_params.REWARD_FORMS``): 'full', 'baseline1' (palm position),
+    'baseline2' (no contact); with ``imitation`` it makes one of the named
+    ``reward_params.VARIANTS``."""
+    imitation: bool = True
+    """Imitation terms r_pI, r_αI on top of the variant (False: any variant without them)."""
+    knobs: reward_params.RewardKnobs = reward_params.RewardKnobs()
+    """The reward's six knobs (``--knobs.K-p 4`` ...); unset ones take the task's own
+    (``tasks.TaskSpec.reward_knobs``: the handshake the authors' K_p 4, K_c 0.5, K_alpha
+    0; the clap and E.T. K_p 1, K_c 0.2, K_alpha 0.1). A run's config.json records every
+    value. Under ``profile='paper'`` unset knobs take the authors' config of each
+    variant, and set ones override every variant's."""
+    mocap_source: Literal[MOCAP_SOURCES] = "auto"
+    """Which demonstrations to read: 'optitrack' (the authors' recordings), 'synthetic'
+    (the project's mocap_data/) or 'auto' (the recordings when present)."""
+    mocap: str | None = None
+    """Folder of the demonstrations; None: the source's default location
+    (../shared/mocap/drl_handshake, or the project's mocap_data/)."""
+    demos: Literal[DEMO_SETS] = "authors"
+    """Which of the recordings' demonstrations: 'authors' (those the authors trained on,
+    ``tasks.TaskSpec.authors_demos``) or 'all'. The project's synthetic files are used
+    whole."""
+    control_dt: float = tasks.CONTROL_DT
+    """Control period, seconds (a multiple of the physics timestep)."""
+    episode_length: int | None = None
+    """Control steps per episode; None takes the paper's (100 handshake, 75 otherwise)."""
+    contact_point: tuple[float, float, float] = (0.45, 0.0, 0.0)
+    """Where the agent's palm centre is at the demonstrated contact when the target is
+    at its nominal pose (world, metres; the shoulder is at the origin)."""
+    target_box: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    """Half-extent of the uniform box of target palm positions, metres (the project
+    profile's; the paper profile draws from the authors' per-task boxes)."""
+    target_rotation_noise: float = 0.0
+    """Std of the angle (radians) of a random rotation, about a uniformly random axis,
+    applied to the target hand per episode (0: the task's nominal orientation; the
+    paper's robustness experiments perturb it)."""
+    target_rotation_angle: float | None = None
+    """If set, every episode's target hand is turned by exactly this angle (radians)
+    about a uniformly random axis instead."""
+    target_orientation_range: tuple[float, float, float] | None = None
+    """Partner model "orientation": half-ranges (radians) of the target hand's yaw, pitch
+    and roll, each drawn uniformly per episode and applied about its palm centre as
+    :func:`yaw_pitch_roll_quat` (yaw about the vertical, pitch about the horizontal axis
+    across the agent's view, roll about the agent's line of sight); goals turn with it.
+    None: the tilt of ``target_rotation_noise`` / ``target_rotation_angle``."""
+    target_speed: float | None = None
+    """None: the target hand stays where reset put it (the paper's training). A number
+    (m/s): it moves at this speed in a uniformly random direction, drawn anew every
+    ``target_turn_period`` seconds and mirrored at the walls of ``target_motion_box``;
+    goals and imitation references move with it (the paper's moving-target test,
+    ``mjx_hands.robustness``). ``reset_with`` can set the speed per episode."""
+    target_speed_range: tuple[float, float] | None = None
+    """Partner model "motion": each episode's speed drawn uniformly from [low, high] m/s
+    (the target moves as with ``target_speed``, which it replaces); None: ``target_speed``."""
+    target_position_noise: float = 0.0
+    """Partner model "sensing": std (metres) of a Gaussian error of the observed target
+    position, drawn anew every control step, as a motion-capture or vision estimate of
+    the partner's hand would carry: everything the observation says about the target
+    (its points or links, the goals and imitation references that follow it) moves by
+    the same error; the physics and the reward see the true hand. 0: exact."""
+    action_delay: int = 0
+    """Partner model "actuation": control steps between a policy's action and the
+    actuators receiving it (a robot controller's latency); the first steps of an episode
+    apply the action that holds the start pose. The reward's action term charges the
+    policy's own action. 0: none."""
+    target_turn_period: float = 0.5
+    """Seconds between the moving target's changes of direction."""
+    target_motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    """Half-extent (metres) of the box around the nominal target palm position that the
+    moving target stays in (within the arm's reach)."""
+    start_offset_steps: int = 5
+    """t_off: the latest start step is t_min - t_off (control steps)."""
+    start_position_noise: float = 0.02
+    """Std of the Gaussian noise on the starting palm position, metres."""
+    start_joint_noise: float = 0.05
+    """Std of the Gaussian noise on the starting finger angles, radians."""
+    contact_distance: float = 0.002
+    """A sensor reads 1 when one of its geoms is closer than this to the target, metres."""
+    start_max_penetration: float = 0.001
+    """Deepest agent-target interpenetration (metres) a start may have; a deeper one
+    starts earlier in the demonstration (see ``HandInteractionEnv._separated_start``)."""
+    start_backoff_steps: int = 5
+    """Control steps each retreat moves the start earlier."""
+    start_backoff_distance: float = 0.02
+    """Metres each retreat at the demonstration's first step moves the palm away from
+    the target's, along the line between the palm centres (0: stop at step 1)."""
+    start_retreats: int = 8
+    """Most retreats per start; 0 keeps every drawn start as it is (the paper's)."""
+    ik_iterations: int = 30
+    """Damped least-squares iterations placing the arm at the start pose."""
+    physics: Literal[PHYSICS] = "auto"
+    """Physics implementation: 'mjx' (MJX, accelerators), 'native' (C MuJoCo on every
+    CPU core, called from the compiled program) or 'auto' (native on CPUs, MJX
+    elsewhere); see ``mjx_hands.physics``."""
+    scene: scene.SceneConfig = scene.SceneConfig()
+    """Physics settings."""
+
+    def __post_init__(self):
+        problems = config_problems(self)
+        if problems:
+            raise ValueError("EnvConfig: " + "; ".join(problems))
+
+
+def moving(config: EnvConfig) -> bool:
+    """Whether ``config``'s target hand moves (``target_speed`` or ``target_speed_range``)."""
+    return config.target_speed is not None or config.target_speed_range is not None
+
+
+def config_problems(config: EnvConfig) -> list[str]:
+    """What is wrong with ``config`` (empty: nothing), each naming the field and what it
+    expects: names outside their vocabularies, and a target orientation or motion that
+    cannot be simulated as configured."""
+    problems = [
+        f"unknown {name} {getattr(config, name)!r}; expected one of {', '.join(choices)}"
+        for name, choices in (
+            ("task", tasks.TASKS),
+            ("profile", profiles.PROFILES),
+            ("reward", tuple(reward_params.REWARD_FORMS)),
+            ("mocap_source", MOCAP_SOURCES),
+            ("demos", DEMO_SETS),
+            ("physics", PHYSICS),
+        )
+        if getattr(config, name) not in choices
+    ]
+    if not isinstance(config.knobs, reward_params.RewardKnobs):
+        problems.append(f"knobs must be a RewardKnobs, got {type(config.knobs).__name__}")
+    ranges = config.target_orientation_range
+    if ranges is not None:
+        if len(ranges) != 3 or not all(np.isfinite(h) and 0 <= h <= np.pi for h in ranges):
+            problems.append(
+                f"target_orientation_range {ranges} must be three half-ranges in [0, pi] "
+                "radians (yaw, pitch, roll)"
+            )
+        if config.target_rotation_noise or config.target_rotation_angle is not None:
+            problems.append(
+                "target_orientation_range and target_rotation_noise/target_rotation_angle "
+                "both turn the target: give one"
+            )
+    if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
+        problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
+    for name in ("target_rotation_noise", "target_position_noise"):
+        value = getattr(config, name)
+        if not (np.isfinite(value) and value >= 0):
+            problems.append(f"{name} {value} must be a finite number >= 0")
+    if not moving(config):
+        return problems
+    if config.target_speed is not None and not (
+        np.isfinite(config.target_speed) and config.target_speed >= 0
+    ):
+        problems.append(f"target_speed {config.target_speed} must be >= 0 m/s (None: static)")
+    speeds = config.target_speed_range
+    if speeds is not None and not (
+        len(speeds) == 2 and all(np.isfinite(v) for v in speeds) and 0 <= speeds[0] <= speeds[1]
+    ):
+        problems.append(
+            f"target_speed_range {speeds} must be [low, high] m/s with 0 <= low <= high"
+        )
+    if not (np.isfinite(config.target_turn_period) and config.target_turn_period > 0):
+        problems.append(f"target_turn_period {config.target_turn_period} must be positive")
+    if not all(np.isfinite(b) and b > 0 for b in config.target_motion_box):
+        problems.append(f"target_motion_box {config.target_motion_box} must be positive metres")
+    return problems
