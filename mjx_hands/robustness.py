@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = Path(args.out or args.run_dirs[0])
     out.mkdir(parents=True, exist_ok=True)
-    task = runs[0][2].config.env.task
+    task = runs[0][2].config.task
     common = {
         "task": task,
         "runs": len(runs),

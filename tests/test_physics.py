@@ -222,15 +222,17 @@ def test_native_training_resumes_as_if_uninterrupted_and_compiles_its_epoch_once
     """DDPG on the hand task with native physics: 2 + 2 epochs equal 4 (parameters and
     replay), and each run traced its epoch once (baseline 2 without imitation: the run
     alone of the population test, whose compiled programs it reuses in one process)."""
+    import dataclasses
     import io
 
     from mjx_hands import checkpoint, train_config, training
 
     def config(run_dir, **overrides):
-        settings = {"reward": "baseline2", "imitation": False, "epochs": 4, "eval_every": 2}
+        settings = {"epochs": 4, "eval_every": 2}
         settings["checkpoint_every"] = 2  # the resume needs epoch 2's; the rest cost saves
         settings |= overrides
-        return tiny.hand_config(run_dir=str(run_dir), **settings)
+        env = dataclasses.replace(tiny.HAND.env, reward="baseline2", imitation=False)
+        return tiny.hand_config(run_dir=str(run_dir), env=env, **settings)
 
     full = training.run(config(tmp_path / "full"), out=io.StringIO())
     training.run(config(tmp_path / "split", epochs=2), out=io.StringIO())
