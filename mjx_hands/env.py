@@ -617,6 +617,50 @@ class HandInteractionEnv(Env):
         )
         return data.replace(mocap_pos=mocap_pos), episode
 
+    def partner_schedule(self, state: State) -> dict[str, jax.Array]:
+        """Where the partner's hand is, and what the policy observes of it, at every
+        control step k = 0..T of the episode that ``state`` (a reset's, single env)
+        starts: none of it depends on the agent's actions (the moving target's path and
+        the sensing errors are keyed by the episode), so a player outside JAX can step
+        the physics and build the observation from these and its own readings
+        (:mod:`mjx_hands.export`). Arrays with a leading axis T + 1:
+
+        * ``mocap_pos`` (T+1, nmocap, 3): the target's mocap bodies in the physics step
+          that ends at step k (k = 0: at reset);
+        * as observed, sensing error included: ``target_pos`` (T+1, 3), ``target_points``,
+          ``goal_points``, ``imitation_points`` (T+1, 6, 3), ``target_links`` (T+1, 21, 3);
+        * ``imitation_active`` (T+1,) 0/1, the phase's flag.
+        """
+
+        def at(data, episode: EpisodeInfo) -> dict[str, jax.Array]:
+            p = jax.tree.map(lambda x: x[episode.demo], self.params)
+            offsets, _, active = rewards.reference_at(p, episode.start_step + episode.step)
+            imitation = rewards.goal_positions(
+                episode.target_points, episode.target_frames, p.j_min, offsets
+            )
+            error = self.sensing_error(episode)
+            links = data.mocap_pos[self.target_mocap[self.observed_links]]
+            return {
+                "mocap_pos": data.mocap_pos,
+                "target_pos": episode.target_pos + error,
+                "target_points": episode.target_points + error,
+                "goal_points": episode.goal_points + error,
+                "imitation_points": imitation + error,
+                "target_links": links + error,
+                "imitation_active": active.astype(jnp.float32),
+            }
+
+        def advance(carry, _):
+            data, episode = carry
+            if episode.target_velocity is not None:
+                data, episode = self._move_target(data, episode)
+            episode = episode.replace(step=episode.step + 1)
+            return (data, episode), at(data, episode)
+
+        start = (state.pipeline_state, state.info["episode"])
+        _, later = jax.lax.scan(advance, start, None, length=self.episode_length)
+        return jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), at(*start), later)
+
     def points_in_target_frame(self, state: State) -> jax.Array:
         """The agent's palm centre and fingertips (6, 3) in the target palm's frame (its
         centre the origin, its axes those of the target palm), where the demonstrations'

@@ -30,7 +30,7 @@ from mjx_hands import (
 )
 from mjx_hands.policies import load_policy
 from mjx_hands.render import VIDEO_KEYS, render_video
-from mjx_hands.rollouts import episode_keys, rollout, summarize
+from mjx_hands.rollouts import EVAL_SEED, episode_keys, rollout, summarize
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,7 +46,7 @@ class EvalArgs:
     best: bool = False
     """Load the policy of the run's best evaluation during training (RUN_DIR/best)
     instead of the latest checkpoint."""
-    seed: int = 12345
+    seed: int = EVAL_SEED
     """Seed of the evaluation episodes' randomisation."""
     video_episodes: int = 3
     """Episodes rendered into the video (0: no video)."""

@@ -219,6 +219,20 @@ class NativeState:
     sensordata: jax.Array  # (nsensordata,) of the last substep's kinematics
 
 
+def native_model(mj_model: mujoco.MjModel, contact_distance: float) -> mujoco.MjModel:
+    """The model native MuJoCo steps: ``mj_model`` with its contact pairs reported from
+    ``contact_distance`` apart (native MuJoCo only reports pairs within their margin; a
+    gap of the same size keeps forces from acting before the geoms touch, as with no
+    margin) and automatic reset off (a diverged simulation shows as NaN, which ends that
+    episode, not as a silent reset to the initial pose). An exported policy's player
+    loads this model."""
+    m = copy.copy(mj_model)
+    m.pair_margin[:] = contact_distance
+    m.pair_gap[:] = contact_distance
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+    return m
+
+
 class NativePhysics:
     """C MuJoCo through ``mujoco.rollout`` on a thread pool (see module docstring)."""
 
@@ -235,15 +249,7 @@ class NativePhysics:
         self.n_substeps = n_substeps
         self.contact_distance = contact_distance
         self.actuated_qadr = _actuated_qpos_adr(mj_model)
-        # Native MuJoCo only reports pairs within their margin; a gap of the same size
-        # keeps forces from acting before the geoms touch (as with no margin).
-        m = copy.copy(mj_model)
-        m.pair_margin[:] = contact_distance
-        m.pair_gap[:] = contact_distance
-        # A diverged simulation shows as NaN (the env ends that episode), not as a
-        # silent reset to the model's initial pose.
-        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
-        self.native_model = m
+        m = self.native_model = native_model(mj_model, contact_distance)
         self.threads = max(1, threads or os.cpu_count() or 1)
         self._datas = [mujoco.MjData(m) for _ in range(self.threads)]
         self._pool = mujoco.rollout.Rollout(nthread=self.threads if self.threads > 1 else 0)

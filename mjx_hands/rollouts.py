@@ -42,6 +42,10 @@ def compiled_rollout(single, reset=None, extra=None):
     return reset, step, per_state
 
 
+EVAL_SEED = 12345
+"""Seed of ``evaluate``'s episodes unless told otherwise (and of an export's)."""
+
+
 def episode_keys(seed: int, num_episodes: int) -> jax.Array:
     """(num_episodes, 2) reset keys of the evaluation episodes of ``seed``."""
     return jax.random.split(jax.random.PRNGKey(seed), num_episodes)

@@ -988,3 +988,42 @@ def test_sac_and_ppo_have_their_own_settings_sized_like_the_preset():
     mine = dataclasses.replace(cpu, sac=dataclasses.replace(cpu.sac, batch_size=77))
     back = train_config.config_from_json(json.loads(json.dumps(train_config.config_to_json(mine))))
     assert back.sac.batch_size == 77 and back == train_config.resolved(mine)
+
+
+def test_an_exported_policy_plays_in_native_mujoco_without_jax(hand_run, tmp_path):
+    """export: the ONNX policy's actions equal the JAX policy's (to 1e-5 on >= 1,000
+    observations of its own episodes); the player, in a process without JAX, ends each
+    exported episode as the training program did, and builds the very observations the
+    environment does, step after step."""
+    from mjx_hands import export, onnx_player, policies, rollouts
+
+    run_dir, result = hand_run
+    assert result.returncode == 0
+    onnx_file = tmp_path / "out" / "policy.onnx"
+    assert export.main([str(run_dir), "--onnx", str(onnx_file), "--episodes", "10"]) == 0
+    record = json.loads((onnx_file.parent / "policy.json").read_text())
+    assert record["check"]["observations"] >= 1000
+    assert record["check"]["max_abs_action_difference"] <= 1e-5
+    assert sum(p["size"] for p in record["observation"]) == 145
+    assert [p["name"] for p in record["observation"]][:3] == ["qpos", "qvel_x_0.1", "contacts"]
+    played = subprocess.run(
+        [sys.executable, str(onnx_file.parent / "play.py"), str(onnx_file.parent),
+         "--json", str(tmp_path / "play.json")],
+        capture_output=True, check=False, text=True, timeout=600,
+    )
+    assert played.returncode == 0, played.stdout[-2000:] + played.stderr[-4000:]
+    summary = json.loads((tmp_path / "play.json").read_text())
+    assert not summary["jax_imported"] and summary["episodes"] == 10
+    assert summary["same_outcome"] == 10 and summary["diverged"] == 0
+    # The player's observations are the environment's (float32 rounding apart).
+    loaded = policies.load_policy(run_dir, eval_envs=10)
+    keys = rollouts.episode_keys(rollouts.EVAL_SEED, 10)
+    trajectory = rollouts.rollout(loaded.single, loaded.act, keys, extra=lambda s: {"obs": s.obs})
+    player = onnx_player.Player(onnx_file.parent)
+    for i in (0, 7):
+        np.testing.assert_allclose(
+            player.play(i)["observations"], trajectory["obs"][:, i], atol=1e-5
+        )
+    # Bad requests are refused by name.
+    assert export.main([str(run_dir), "--onnx", str(tmp_path / "p.txt")]) == 2
+    assert export.main([str(tmp_path / "none"), "--onnx", str(onnx_file)]) == 2
