@@ -1,8 +1,9 @@
 """Robustness of trained policies to what training did not randomise: the target hand's
-orientation and a target hand that moves.
+orientation, a target hand that moves, and imperfect sensing and actuation.
 
     python -m mjx_hands.robustness RUN_DIR [RUN_DIR ...] [--out DIR]
         [--max-angle-deg 60 --angle-step-deg 15] [--speeds 0 0.05 0.1 0.2 0.3]
+    python -m mjx_hands.robustness RUN_DIR --sweep sensing [--noise-mm 0 2 5 10 --delays 0 1 2]
 
 The paper's two tests (its Figs. 5 and 6), for one run or for several runs of one task
 (e.g. the seeds of a grid variant: mean and standard error over them):
@@ -14,12 +15,17 @@ The paper's two tests (its Figs. 5 and 6), for one run or for several runs of on
 * **motion**: the target hand moving at a constant speed in a random direction drawn
   anew every ``--turn-period`` seconds, inside a box around its nominal position
   (``EnvConfig.target_speed``); goals and imitation references move with it ->
-  ``robustness_motion.json`` / ``.png``, success against speed.
+  ``robustness_motion.json`` / ``.png``, success against speed;
+* **sensing** (``--sweep sensing`` or ``all``): the observed target position off by a
+  Gaussian error of each ``--noise-mm`` (``EnvConfig.target_position_noise``), and the
+  action reaching the actuators each of ``--delays`` control steps late
+  (``EnvConfig.action_delay``) -> ``robustness_sensing.json`` / ``.png``.
 
 Every cell (and speed) sees the same episodes: episode k of each uses the same key
 (demonstration, target position, start pose), so cells differ only in the target's
 orientation or speed. Orientations and speeds are data of one compiled reset: a whole
-sweep compiles once per run.
+sweep compiles once per run; each noise level and delay is an environment of its own
+(one compile each).
 """
 
 from __future__ import annotations
@@ -41,6 +47,14 @@ from mjx_hands import env as env_lib
 
 ORIENTATION_FILE = "robustness_orientation"
 MOTION_FILE = "robustness_motion"
+SENSING_FILE = "robustness_sensing"
+SWEEPS = {
+    "both": ("orientation", "motion"),
+    "orientation": ("orientation",),
+    "motion": ("motion",),
+    "sensing": ("sensing",),
+    "all": ("orientation", "motion", "sensing"),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,8 +63,9 @@ class RobustnessArgs:
 
     run_dirs: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
     """Folders written by train.py (or grid members), all of one task."""
-    sweep: Literal["both", "orientation", "motion"] = "both"
-    """Which test to run."""
+    sweep: Literal[tuple(SWEEPS)] = "both"
+    """Which tests to run: both (orientation and motion, the paper's), one of them,
+    sensing (noise and delay), or all."""
     out: str | None = None
     """Output folder; default the run's folder (required with several runs)."""
     max_angle_deg: float = 60.0
@@ -59,6 +74,10 @@ class RobustnessArgs:
     """Step of the yaw and pitch grid, degrees."""
     speeds: tuple[float, ...] = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3)
     """Speeds of the moving target, m/s."""
+    noise_mm: tuple[float, ...] = (0.0, 2.0, 5.0, 10.0)
+    """Std of the observed target position's error, millimetres (sensing sweep)."""
+    delays: tuple[int, ...] = (0, 1, 2)
+    """Control steps between an action and the actuators (sensing sweep)."""
     turn_period: float = 0.5
     """Seconds between the moving target's changes of direction."""
     motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
@@ -86,6 +105,10 @@ def check_args(args: RobustnessArgs) -> None:
         problems.append(f"--angle-step-deg {args.angle_step_deg} must be positive")
     if not args.speeds or not all(math.isfinite(s) and s >= 0 for s in args.speeds):
         problems.append(f"--speeds {list(args.speeds)} must be one or more speeds >= 0 (m/s)")
+    if not args.noise_mm or not all(math.isfinite(n) and n >= 0 for n in args.noise_mm):
+        problems.append(f"--noise-mm {list(args.noise_mm)} must be one or more stds >= 0 (mm)")
+    if not args.delays or not all(isinstance(d, int) and d >= 0 for d in args.delays):
+        problems.append(f"--delays {list(args.delays)} must be one or more whole steps >= 0")
     if not (math.isfinite(args.turn_period) and args.turn_period > 0):
         problems.append(f"--turn-period {args.turn_period} must be positive (seconds)")
     if not all(math.isfinite(b) and b > 0 for b in args.motion_box):
@@ -205,6 +228,38 @@ def motion_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     return {k: v.mean(axis=1) for k, v in result.items()}
 
 
+@functools.lru_cache(maxsize=16)
+def imperfect_env(env, noise: float, delay: int):
+    """``env`` observing the target with a ``noise`` (m) error and acting ``delay`` steps
+    late, one object per setting (so every policy of a program shares its compile)."""
+    if (noise, delay) == (env.config.target_position_noise, env.config.action_delay):
+        return env
+    config = dataclasses.replace(env.config, target_position_noise=noise, action_delay=delay)
+    return env_lib.HandInteractionEnv(config)
+
+
+def sensing_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
+    """Success per noise level (delay 0) and per delay (noise 0) of one policy: arrays
+    ``noise_success_final`` (n_noise,), ``delay_success_final`` (n_delays,) and the same
+    at some step. Every condition runs the same episodes."""
+    identity = np.array([[1.0, 0.0, 0.0, 0.0]])
+    print(
+        f"  sensing: {len(args.noise_mm)} noise levels, {len(args.delays)} delays x "
+        f"{args.episodes} episodes",
+        file=log,
+        flush=True,
+    )
+    conditions = [("noise", (mm / 1000.0, 0)) for mm in args.noise_mm]
+    conditions += [("delay", (0.0, d)) for d in args.delays]
+    out: dict[str, list] = {}
+    for axis, (noise, delay) in conditions:
+        run = imperfect_env(env, noise, delay)
+        result = run_episodes(run, policy, identity, None, args.episodes, args.seed, args.chunk)
+        for key, value in result.items():
+            out.setdefault(f"{axis}_{key}", []).append(float(value.mean()))
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
 def combine(per_run: list[dict], episodes: int) -> dict:
     """Mean and standard error of each array: {key: list, key_se: list, key_per_run}. The
     error is over runs; for one run, the binomial error over its ``episodes``."""
@@ -281,6 +336,35 @@ def plot_motion(summary: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def plot_sensing(summary: dict, path: Path) -> None:
+    """Success at the end against the sensing error and against the action delay."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True, sharey=True)
+    for ax, axis, xs, label in (
+        (axes[0], "noise", summary["noise_mm"], "std of the observed target position (mm)"),
+        (axes[1], "delay", summary["delays"], "action delay (control steps)"),
+    ):
+        for key, style, name in (
+            ("success_final", "s-", "success at the end"),
+            ("success", "o--", "success at some step"),
+        ):
+            values = summary[f"{axis}_{key}"]
+            ax.errorbar(xs, values, yerr=summary[f"{axis}_{key}_se"], fmt=style, capsize=3,
+                        label=name)  # fmt: skip
+        ax.set_xlabel(label)
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success rate")
+    axes[0].legend(loc="lower left")
+    fig.suptitle(f"{summary['task']}: imperfect sensing and actuation ({summary['runs']} run(s))")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def load_runs(args: RobustnessArgs) -> list[tuple]:
     """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
     loaded = []
@@ -315,7 +399,8 @@ def main(argv: list[str] | None = None) -> int:
         "episodes": args.episodes,
         "seed": args.seed,
     }
-    if args.sweep in ("both", "orientation"):
+    sweeps = SWEEPS[args.sweep]
+    if "orientation" in sweeps:
         per_run = []
         for run_dir, policy, single, _ in runs:
             print(f"{run_dir}:", flush=True)
@@ -331,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
             f"the grid, {summary['success_final'][centre][centre]:.2f} at the nominal pose; "
             f"{out / ORIENTATION_FILE}.json/.png"
         )
-    if args.sweep in ("both", "motion"):
+    if "motion" in sweeps:
         per_run = []
         for run_dir, policy, single, _ in runs:
             print(f"{run_dir}:", flush=True)
@@ -348,6 +433,22 @@ def main(argv: list[str] | None = None) -> int:
             f"{s:g} m/s {v:.2f}" for s, v in zip(args.speeds, summary["success_final"])
         )
         print(f"motion: success at the end {shown}; {out / MOTION_FILE}.json/.png")
+    if "sensing" in sweeps:
+        per_run = []
+        for run_dir, policy, single, _ in runs:
+            print(f"{run_dir}:", flush=True)
+            per_run.append(sensing_sweep(single, policy, args))
+        summary = common | {"noise_mm": list(args.noise_mm), "delays": list(args.delays)}
+        summary = summary | combine(per_run, args.episodes)
+        (out / f"{SENSING_FILE}.json").write_text(json.dumps(summary, indent=1))
+        plot_sensing(summary, out / f"{SENSING_FILE}.png")
+        noise = ", ".join(
+            f"{n:g} mm {v:.2f}" for n, v in zip(args.noise_mm, summary["noise_success_final"])
+        )
+        delay = ", ".join(
+            f"{d} steps {v:.2f}" for d, v in zip(args.delays, summary["delay_success_final"])
+        )
+        print(f"sensing: success at the end {noise}; delay {delay}; {out / SENSING_FILE}.json/.png")
     return 0
 
 

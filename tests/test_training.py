@@ -488,6 +488,15 @@ def test_robustness_sweeps_a_trained_policy_over_orientations_and_speeds(hand_ru
     with counting_traces() as traced:
         assert robustness.main([str(run_dir), *args]) == 0
     assert traced == []
+    # Imperfect sensing and actuation: noise 0 and delay 0 are the nominal episodes again.
+    sensing = [str(run_dir), "--sweep", "sensing", "--out", str(tmp_path), "--episodes", "2"]
+    assert robustness.main([*sensing, "--noise-mm", "0", "5", "--delays", "0", "1"]) == 0
+    imperfect = json.loads((tmp_path / "robustness_sensing.json").read_text())
+    assert imperfect["noise_mm"] == [0.0, 5.0] and imperfect["delays"] == [0, 1]
+    for key in ("success", "success_final"):
+        assert imperfect[f"noise_{key}"][0] == imperfect[f"delay_{key}"][0] == moving[key][0]
+    assert (tmp_path / "robustness_sensing.png").stat().st_size > 5000
+    assert robustness.main([*sensing, "--delays", "-1"]) == 2
 
 
 def test_study_make_renders_blind_pairs_from_identical_starts(hand_run, tmp_path):
