@@ -356,6 +356,7 @@ def plot_sensing(summary: dict, path: Path) -> None:
             ax.errorbar(xs, values, yerr=summary[f"{axis}_{key}_se"], fmt=style, capsize=3,
                         label=name)  # fmt: skip
         ax.set_xlabel(label)
+        ax.set_xticks(xs)
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("success rate")
