@@ -13,15 +13,32 @@
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
+#
+#   DRY_RUN=1 STAGES="throughput train grid learners target paper" bash benchmarks/gpu_session.sh
+#
+# runs every stage at tiny sizes on any machine (CPU included) to the same files: CI does,
+# so the script cannot rot between GPU sessions.
 # On a machine that has JAX (with CUDA) but not mujoco/mujoco-mjx/brax, put their
 # wheels in .whl/ first (see benchmarks/RESULTS.md, "Running on a GPU").
 set -u
 OUT=${OUT:-gpu_out}
-BUDGET_S=${BUDGET_S:-560}
-THROUGHPUT_S=${THROUGHPUT_S:-200}
+DRY_RUN=${DRY_RUN:-0}
+# A dry run on 2 CPU cores compiles MJX for the throughput stage (minutes): more time.
+BUDGET_S=${BUDGET_S:-$([ "$DRY_RUN" = 1 ] && echo 3600 || echo 560)}
+THROUGHPUT_S=${THROUGHPUT_S:-$([ "$DRY_RUN" = 1 ] && echo 900 || echo 200)}
 mkdir -p "$OUT"
 WHEELS=${WHEELS:-.whl}
 STAGES=${STAGES:-throughput train}
+TINY=""  # appended to every training command (the last of a repeated flag wins)
+if [ "$DRY_RUN" = 1 ]; then
+  TINY="--mocap-source synthetic --num-envs 4 --eval-envs 4 --epochs 1 --eval-every 1
+    --ddpg.batch-size 16 --ddpg.replay-capacity 256 --ddpg.min-replay-size 16
+    --ddpg.unroll-length 2 --ddpg.iterations-per-epoch 1 --ddpg.updates-per-iteration 2
+    --ddpg.hidden-sizes 16 16"
+  BATCHES=${BATCHES:-4} ENV_STEP_BATCHES=${ENV_STEP_BATCHES:-4} CONTROL_STEPS=${CONTROL_STEPS:-2}
+  GRID_SEEDS=${GRID_SEEDS:-1} PAPER_SEEDS=${PAPER_SEEDS:-1} GRID_TASKS=${GRID_TASKS:-et}
+  PAPER_TASKS=${PAPER_TASKS:-et} LEARNER_SEEDS=${LEARNER_SEEDS:-1} TIME_MINUTES=0.5
+fi
 # A warm machine keeps /tmp/site from an earlier call: install once.
 if compgen -G "$WHEELS/*.whl" >/dev/null && [ ! -d /tmp/site/mujoco ]; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
@@ -54,8 +71,9 @@ train() {
   minutes=$(python3 -c "print(max(0.5, ($left - 90) / 60))")
   echo "== training: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
   rm -rf /tmp/gpu_run
+  # shellcheck disable=SC2086  # TRAIN_ARGS and TINY hold several flags
   timeout -s INT "$((left - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
-    --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} 2>&1 | tee "$OUT/train.log"
+    --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} $TINY 2>&1 | tee "$OUT/train.log"
   for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
 }
 
@@ -72,8 +90,9 @@ grids_by_task() {
     n=$((n - 1 > 0 ? n - 1 : 1))
     echo "== $label $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
     rm -rf "/tmp/$label-$task"
+    # shellcheck disable=SC2086  # TINY holds several flags
     timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" "$@" \
-      --max-minutes "$minutes" --run-dir "/tmp/$label-$task" 2>&1 | tee "$OUT/$label-$task.log"
+      --max-minutes "$minutes" --run-dir "/tmp/$label-$task" $TINY 2>&1 | tee "$OUT/$label-$task.log"
     # Everything but checkpoints: metrics, configs, plots of every member.
     (cd /tmp && find "$label-$task" -name checkpoints -prune -o -name best -prune -o -type f -print \
       | tar -cf - -T -) | tar -xf - -C "$OUT"
@@ -129,10 +148,11 @@ learners() {
     echo "== learners $learner on $task: ${left} s left, --max-minutes ${minutes}" | tee -a "$OUT/session.log"
     rm -rf "/tmp/learners-$learner"
     timeout -s INT "$((left - 10))" python3 -m mjx_hands.experiments run --task "$task" \
-      --preset gpu --variants "${LEARNER_VARIANT:-no_imitation}" --seeds 5 --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
+      --preset gpu --variants "${LEARNER_VARIANT:-no_imitation}" --seeds "${LEARNER_SEEDS:-5}" \
+      --num-envs "${GRID_ENVS:-1024}" --eval-envs 256 \
       --ddpg.batch-size 1024 --ddpg.replay-capacity 250000 --ddpg.min-replay-size 10240 \
       --no-save-replay --epochs 1000 --max-minutes "$minutes" --run-dir "/tmp/learners-$learner" \
-      $flags ${GRID_ARGS:-} 2>&1 | tee "$OUT/learners-$learner.log"
+      $flags ${GRID_ARGS:-} $TINY 2>&1 | tee "$OUT/learners-$learner.log"
     (cd /tmp && find "learners-$learner" -name checkpoints -prune -o -name best -prune -o -type f \
       -print | tar -cf - -T -) | tar -xf - -C "$OUT"
     pairs="$pairs $learner=$OUT/learners-$learner"
@@ -145,13 +165,19 @@ target() {
   # The issue's GPU target: the handshake to 90 % success at the end, minutes from launch
   # (compiles included), ddpg-ln then the paper's DDPG, each given half of what is left.
   left=$((BUDGET_S - SECONDS))
-  minutes=$(python3 -c "print(max(0.5, ($left / 2 - 60) / 60))")
+  minutes=${TIME_MINUTES:-$(python3 -c "print(max(0.5, ($left / 2 - 60) / 60))")}
   echo "== time to 90 %: ${left} s left, at most ${minutes} min per learner" | tee -a "$OUT/session.log"
+  # shellcheck disable=SC2086  # TINY holds several flags
   timeout -s INT "$((left - 10))" python3 -m benchmarks.time_to_target --tasks ${TIME_TASKS:-handshake} \
     --algos ddpg-ln ddpg --minutes "$minutes" --mocap-source synthetic \
-    --out "$OUT/results_time_to_target_gpu.json" 2>&1 | tee "$OUT/time.log"
+    --out "$OUT/results_time_to_target_gpu.json" -- $TINY 2>&1 | tee "$OUT/time.log"
 }
 
+# What each stage leaves in $OUT when it worked (a dry run fails without it).
+declare -A RESULT=(
+  [throughput]=results_gpu.json [train]=metrics.csv [grid]=fig4/summary.json
+  [learners]=learners [target]=results_time_to_target_gpu.json [paper]=paper-fig4/summary.json
+)
 for stage in $STAGES; do
   case $stage in
     throughput|train|grid|learners|target|paper) "$stage" ;;
@@ -159,3 +185,11 @@ for stage in $STAGES; do
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"
+missing=""
+for stage in $STAGES; do
+  [ -e "$OUT/${RESULT[$stage]}" ] || missing="$missing $stage ($OUT/${RESULT[$stage]})"
+done
+if [ -n "$missing" ]; then
+  echo "== stages without their results:$missing" | tee -a "$OUT/session.log"
+  [ "$DRY_RUN" = 1 ] && exit 1  # a real session keeps whatever the budget allowed
+fi
