@@ -1,0 +1,172 @@
+"""MJX (its JAX and its Warp implementation) against native MuJoCo, one control period at a
+time, from the very states of contact-rich native episodes.
+
+    python -m benchmarks.physics_agreement --impls jax warp --out benchmarks/physics_agreement/handshake.json
+
+Episodes follow the demonstration (``mjx_hands.demo_replay``'s scripted follower) and
+close the fingers from the episode's middle on (as ``benchmarks.contact_rules``): the
+hands meet, press and slide. Every recorded transition (state s_t, the set-points and
+target pose of period t+1) is replayed on each MJX implementation from s_t, cold solver
+start as the native step has, and its joint positions after the period are compared with
+the native s_{t+1}. Reported per implementation: the distribution (median, 90th
+percentile, max) of the largest joint-angle difference, split by whether the native step
+had an agent-target contact, and the implementation's speed on that batch (control
+periods per second, after its compile). ``--impls warp`` needs ``warp-lang`` (``pip
+install -e ".[warp]"``); MuJoCo Warp then runs on the CPU device when no GPU is there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from benchmarks import machine
+from mjx_hands import demo_replay, physics, scene, shadow_hand
+from mjx_hands import env as env_lib
+from mjx_hands.env_config import EnvConfig
+
+
+def native_transitions(env, episodes: int, close: float, seed: int) -> dict[str, np.ndarray]:
+    """(N, ...) arrays of every transition of ``episodes`` follower episodes on native
+    physics: the state before (qpos, qvel, time), the period's set-points and mocap
+    poses, the native state after, and whether it had an agent-target contact."""
+    fingers = np.zeros(env.action_size, np.float32)
+    fingers[len(shadow_hand.ARM_JOINTS) + 2 :] = close
+
+    def act(state):
+        action = demo_replay.follower_action(env, state)
+        late = state.info["episode"].step >= env.episode_length // 2
+        return jnp.clip(action + jnp.where(late, jnp.asarray(fingers), 0.0), -1.0, 1.0)
+
+    step = jax.jit(lambda s: jax.vmap(env.step)(s, jax.vmap(act)(s)))
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(seed), episodes))
+    keys = ("qpos", "qvel", "time", "ctrl", "mocap_pos", "mocap_quat", "sensordata")
+    frames = [{k: np.asarray(getattr(state.pipeline_state, k)) for k in keys}]
+    for _ in range(env.episode_length):
+        state = step(state)
+        frames.append({k: np.asarray(getattr(state.pipeline_state, k)) for k in keys})
+    before, after = frames[:-1], frames[1:]
+    cat = lambda rows, k: np.concatenate([r[k] for r in rows])
+    found = cat(after, "sensordata")[:, scene.SENSOR_LAYOUT.closest][:, 0]
+    return {
+        "qpos": cat(before, "qpos"),
+        "qvel": cat(before, "qvel"),
+        "time": cat(before, "time"),
+        "ctrl": cat(after, "ctrl"),
+        "mocap_pos": cat(after, "mocap_pos"),
+        "mocap_quat": cat(after, "mocap_quat"),
+        "qpos_after": cat(after, "qpos"),
+        "contact": found > 0,
+    }
+
+
+def mjx_periods(
+    model: mujoco.MjModel, impl: str, n_substeps: int, t: dict[str, np.ndarray], contacts: int
+):
+    """(qpos after one control period (N, nq), periods per second) of MJX ``impl`` from
+    every transition's start; Warp with room for ``contacts`` contacts per world."""
+    if impl == "warp":  # MuJoCo Warp refuses the flag; it only changes what a blow-up does
+        model = copy.copy(model)
+        model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    m = mjx.put_model(model, impl=impl)
+    # Warp keeps room for a fixed number of contacts (48 by default; with the hands' 400
+    # worlds 256 overflowed its broadphase and cost 1e-2 rad in contact, 4096 did not).
+    sizes = {"naconmax": contacts} if impl == "warp" else {}
+    template = mjx.put_data(model, mujoco.MjData(model), impl=impl, **sizes)
+
+    def period(qpos, qvel, time, ctrl, mocap_pos, mocap_quat):
+        d = template.replace(
+            qpos=qpos, qvel=qvel, time=time, ctrl=ctrl, mocap_pos=mocap_pos, mocap_quat=mocap_quat
+        )
+        with jax.default_matmul_precision("highest"):
+            d = jax.lax.fori_loop(0, n_substeps, lambda _, d: mjx.step(m, d), d)
+        return d.qpos
+
+    run = jax.jit(jax.vmap(period))
+    args = [jnp.asarray(t[k]) for k in ("qpos", "qvel", "time", "ctrl", "mocap_pos", "mocap_quat")]
+    jax.block_until_ready(run(*args))  # compile (and warm up)
+    start = time.perf_counter()
+    qpos = np.asarray(jax.block_until_ready(run(*args)))
+    return qpos, len(t["qpos"]) / (time.perf_counter() - start)
+
+
+def summary(diff: np.ndarray) -> dict[str, float]:
+    return {
+        "n": int(diff.size),
+        "median": float(np.median(diff)) if diff.size else float("nan"),
+        "p90": float(np.percentile(diff, 90)) if diff.size else float("nan"),
+        "max": float(diff.max()) if diff.size else float("nan"),
+    }
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
+    parser.add_argument("--impls", nargs="+", default=["jax", "warp"], choices=["jax", "warp"])
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--close", type=float, default=0.5, help="finger closing, action units")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
+    parser.add_argument(
+        "--warp-contacts", type=int, default=4096, help="Warp's naconmax (256 overflowed)"
+    )
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+
+    env = env_lib.HandInteractionEnv(
+        EnvConfig(task=args.task, mocap_source=args.mocap_source, physics="native")
+    )
+    print(f"native: {args.episodes} follower episodes of {args.task} ...", flush=True)
+    t = native_transitions(env, args.episodes, args.close, args.seed)
+    model = physics.native_model(env.mj_model, env.config.contact_distance)
+    record = {
+        "machine": machine.describe(),
+        "task": args.task,
+        "episodes": args.episodes,
+        "close": args.close,
+        "seed": args.seed,
+        "transitions": len(t["qpos"]),
+        "in_contact": int(t["contact"].sum()),
+        "substeps": env.n_substeps,
+        "warp_contacts": args.warp_contacts,
+        "impls": {},
+    }
+    for impl in args.impls:
+        print(f"MJX {impl}: {len(t['qpos'])} control periods ...", flush=True)
+        try:
+            qpos, rate = mjx_periods(model, impl, env.n_substeps, t, args.warp_contacts)
+        except (ImportError, RuntimeError, NotImplementedError, ValueError) as err:  # e.g. no warp
+            record["impls"][impl] = {"error": f"{type(err).__name__}: {err}"}
+            print(f"  {impl}: {type(err).__name__}: {err}", file=sys.stderr)
+            continue
+        diff = np.abs(qpos - t["qpos_after"]).max(axis=1)
+        record["impls"][impl] = {
+            "periods_per_second": rate,
+            "contact": summary(diff[t["contact"]]),
+            "free": summary(diff[~t["contact"]]),
+        }
+        c, f = record["impls"][impl]["contact"], record["impls"][impl]["free"]
+        print(
+            f"  {impl}: max |dq| after a period, free: median {f['median']:.1e}, max "
+            f"{f['max']:.1e}; in contact ({c['n']}): median {c['median']:.1e}, p90 "
+            f"{c['p90']:.1e}, max {c['max']:.1e} rad; {rate:,.0f} periods/s",
+            flush=True,
+        )
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(record, indent=2))
+    return record
+
+
+if __name__ == "__main__":
+    main()
