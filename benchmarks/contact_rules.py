@@ -28,8 +28,10 @@ from mjx_hands import demo_replay, rewards, shadow_hand
 from mjx_hands import env as env_lib
 
 
-def rollout(env: env_lib.HandInteractionEnv, episodes: int, close: float, seed: int) -> dict:
-    """Both rules' readings over ``episodes`` follower episodes; (T, N, 15) arrays."""
+def closing_follower(env: env_lib.HandInteractionEnv, close: float):
+    """The demonstration follower that closes every finger by ``close`` (action units)
+    from the episode's middle on: single ``State`` -> action (24,). Contact-rich episodes
+    without a trained policy."""
     fingers = np.zeros(env.action_size, np.float32)
     fingers[len(shadow_hand.ARM_JOINTS) + 2 :] = close  # every finger channel, not the wrist
 
@@ -37,6 +39,13 @@ def rollout(env: env_lib.HandInteractionEnv, episodes: int, close: float, seed: 
         action = demo_replay.follower_action(env, state)
         late = state.info["episode"].step >= env.episode_length // 2
         return jnp.clip(action + jnp.where(late, jnp.asarray(fingers), 0.0), -1.0, 1.0)
+
+    return act
+
+
+def rollout(env: env_lib.HandInteractionEnv, episodes: int, close: float, seed: int) -> dict:
+    """Both rules' readings over ``episodes`` follower episodes; (T, N, 15) arrays."""
+    act = closing_follower(env, close)
 
     def step(state):
         state = jax.vmap(env.step)(state, jax.vmap(act)(state))

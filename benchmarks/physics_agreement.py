@@ -30,9 +30,9 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from benchmarks import machine
-from mjx_hands import demo_replay, physics, scene, shadow_hand
+from benchmarks import contact_rules, machine
 from mjx_hands import env as env_lib
+from mjx_hands import physics, scene
 from mjx_hands.env_config import EnvConfig
 
 
@@ -40,14 +40,7 @@ def native_transitions(env, episodes: int, close: float, seed: int) -> dict[str,
     """(N, ...) arrays of every transition of ``episodes`` follower episodes on native
     physics: the state before (qpos, qvel, time), the period's set-points and mocap
     poses, the native state after, and whether it had an agent-target contact."""
-    fingers = np.zeros(env.action_size, np.float32)
-    fingers[len(shadow_hand.ARM_JOINTS) + 2 :] = close
-
-    def act(state):
-        action = demo_replay.follower_action(env, state)
-        late = state.info["episode"].step >= env.episode_length // 2
-        return jnp.clip(action + jnp.where(late, jnp.asarray(fingers), 0.0), -1.0, 1.0)
-
+    act = contact_rules.closing_follower(env, close)
     step = jax.jit(lambda s: jax.vmap(env.step)(s, jax.vmap(act)(s)))
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(seed), episodes))
     keys = ("qpos", "qvel", "time", "ctrl", "mocap_pos", "mocap_quat", "sensordata")
