@@ -28,7 +28,7 @@ def versions() -> dict:
 
     packages = (
         "jax", "jaxlib", "jax-cuda12-plugin", "jax-cuda13-plugin", "mujoco", "mujoco-mjx",
-        "numpy", "flax", "optax", "orbax-checkpoint", "brax",
+        "numpy", "flax", "optax", "orbax-checkpoint", "brax", "warp-lang",
     )  # fmt: skip
     return {"python": platform.python_version()} | {p: version_of(p) for p in packages}
 

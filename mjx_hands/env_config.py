@@ -21,8 +21,9 @@ Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 DEMO_SETS = ("authors", "all")
 """``EnvConfig.demos``: the demonstrations the authors trained on, or all recorded."""
 MOCAP_SOURCES = ("auto", "optitrack", "synthetic")
-PHYSICS = ("auto", "mjx", "native")
-"""``EnvConfig.physics``: MJX, native C MuJoCo, or auto (native on CPUs); ``mjx_hands.physics``."""
+PHYSICS = ("auto", "mjx", "native", "warp")
+"""``EnvConfig.physics``: MJX, native C MuJoCo, MuJoCo Warp, or auto (native on CPUs, MJX
+elsewhere); ``mjx_hands.physics``."""
 
 
 def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
@@ -139,7 +140,8 @@ class EnvConfig:
     """Damped least-squares iterations placing the arm at the start pose."""
     physics: Literal[PHYSICS] = "auto"
     """Physics implementation: 'mjx' (MJX, accelerators), 'native' (C MuJoCo on every
-    CPU core, called from the compiled program) or 'auto' (native on CPUs, MJX
+    CPU core, called from the compiled program), 'warp' (MuJoCo Warp through MJX; GPUs,
+    or Warp's CPU device; needs the ``[warp]`` extra) or 'auto' (native on CPUs, MJX
     elsewhere); see ``mjx_hands.physics``."""
     scene: scene.SceneConfig = scene.SceneConfig()
     """Physics settings."""

@@ -58,7 +58,7 @@ class EvalArgs:
     """Video width in pixels (a multiple of 16 keeps codecs from resizing)."""
     height: int = 384
     """Video height in pixels."""
-    physics: Literal["run", "auto", "mjx", "native"] = "run"
+    physics: Literal["run", "auto", "mjx", "native", "warp"] = "run"
     """Physics of the evaluation episodes: the run's own, or another implementation of
     the same scene (e.g. a policy trained on native MuJoCo evaluated on MJX)."""
 

@@ -10,13 +10,15 @@ a :class:`Physics`:
   a ``jax.pure_callback`` whose batched form hands the whole batch to one
   ``mujoco.rollout`` call on a persistent thread pool (CPUs, where MJX runs the hand
   pair at a tenth of native speed).
+* :class:`WarpPhysics` steps MuJoCo Warp (MJX's ``impl="warp"``) inside the compiled
+  program: native MuJoCo's contacts and sensors as GPU kernels (``[warp]`` extra).
 
-Both read what the scene defines once as MuJoCo sensors (``scene.SENSOR_LAYOUT``):
+All read what the scene defines once as MuJoCo sensors (``scene.SENSOR_LAYOUT``):
 the palm centre and fingertip sites, the 15 phalanx contact sensors and the closest
 agent-target contact. Native MuJoCo computes the sensors itself; MJX computes the same
 quantities from its own kinematics and contact list (its sensor stage is switched
 off: it would cost every substep, and MJX counts a contact only within the margin the
-constraint uses).
+constraint uses); MuJoCo Warp computes the sensors as native MuJoCo does.
 
 Where they differ: MJX keeps ``max_geom_pairs`` / ``max_contact_points`` contacts per
 collision group in float32; native MuJoCo keeps every contact, in float64 (its state
@@ -43,7 +45,16 @@ from mujoco import mjx
 from mjx_hands import scene
 from mjx_hands import shadow_hand as sh
 
-PHYSICS = ("mjx", "native")
+PHYSICS = ("mjx", "native", "warp")
+WARP_CONTACTS = 1 << 16
+"""Contacts MuJoCo Warp keeps room for, summed over the batch (its ``naconmax``): the hand
+pair makes ~10 per world in contact; 256 for 400 worlds overflowed (a printed warning)."""
+WARP_SENSOR_MATCHES = 128
+"""Contacts a MuJoCo Warp contact sensor considers (64 overflowed in training; the hands
+pressed together made 35; it sizes buffers of ~50 kB per world)."""
+WARP_CONSTRAINTS = 1024
+"""Constraint rows per world MuJoCo Warp keeps room for (its ``njmax``; 64 overflowed with
+the hands pressed together)."""
 NATIVE_CONTROL_SPEC = int(
     mujoco.mjtState.mjSTATE_CTRL
     | mujoco.mjtState.mjSTATE_MOCAP_POS
@@ -219,6 +230,24 @@ class NativeState:
     sensordata: jax.Array  # (nsensordata,) of the last substep's kinematics
 
 
+def sensor_readings(state: NativeState, contact_distance: float) -> Readings:
+    """The readings of a simulation whose engine computes the scene's sensors itself
+    (native MuJoCo, MuJoCo Warp): from ``state.sensordata``."""
+    layout = scene.SENSOR_LAYOUT
+    found, dist = state.sensordata[layout.closest]
+    per_geom = state.sensordata[layout.contacts].reshape(len(sh.CONTACT_SENSORS), 2)
+    touching = (per_geom[:, 0] > 0) & (per_geom[:, 1] < contact_distance)
+    return Readings(
+        qpos=state.qpos,
+        qvel=state.qvel,
+        points=state.sensordata[layout.points].reshape(len(sh.HAND_POINTS), 3),
+        contacts=touching.astype(jnp.float32),
+        touch=(state.sensordata[layout.touch] > 0.0).astype(jnp.float32),
+        penetration=jnp.where(found > 0, jnp.maximum(-dist, 0.0), 0.0),
+        finite=jnp.isfinite(state.qpos).all() & jnp.isfinite(state.qvel).all(),
+    )
+
+
 def native_model(mj_model: mujoco.MjModel, contact_distance: float) -> mujoco.MjModel:
     """The model native MuJoCo steps: ``mj_model`` with its contact pairs reported from
     ``contact_distance`` apart (native MuJoCo only reports pairs within their margin; a
@@ -283,19 +312,7 @@ class NativePhysics:
         return state.replace(qpos=qpos, qvel=qvel, time=time, sensordata=sensordata)
 
     def readings(self, state: NativeState) -> Readings:
-        layout = scene.SENSOR_LAYOUT
-        found, dist = state.sensordata[layout.closest]
-        per_geom = state.sensordata[layout.contacts].reshape(len(sh.CONTACT_SENSORS), 2)
-        touching = (per_geom[:, 0] > 0) & (per_geom[:, 1] < self.contact_distance)
-        return Readings(
-            qpos=state.qpos,
-            qvel=state.qvel,
-            points=state.sensordata[layout.points].reshape(len(sh.HAND_POINTS), 3),
-            contacts=touching.astype(jnp.float32),
-            touch=(state.sensordata[layout.touch] > 0.0).astype(jnp.float32),
-            penetration=jnp.where(found > 0, jnp.maximum(-dist, 0.0), 0.0),
-            finite=jnp.isfinite(state.qpos).all() & jnp.isfinite(state.qvel).all(),
-        )
+        return sensor_readings(state, self.contact_distance)
 
     # ------------------------------------------------------------- the callback
     def _rollout(self, state: NativeState, nstep: int):
@@ -351,9 +368,96 @@ class NativePhysics:
         )
 
 
+class WarpPhysics:
+    """MuJoCo Warp (MJX's ``impl="warp"``) inside the compiled program: the native
+    model's contacts and sensors, stepped by Warp kernels on the GPU (or Warp's CPU
+    device). Its state is a :class:`NativeState`; every control period starts from a
+    fresh Warp data holding that state, with a cold solver start, as the native step
+    does (``benchmarks/physics_agreement.py``: native to 3e-7 rad in contact)."""
+
+    name = "warp"
+
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        n_substeps: int,
+        contact_distance: float,
+        contacts: int = WARP_CONTACTS,
+        constraints: int = WARP_CONSTRAINTS,
+    ):
+        try:
+            import warp  # MJX's Warp implementation needs it
+        except ImportError as err:
+            raise ImportError(
+                "physics='warp' needs MuJoCo Warp: pip install -e '.[warp]' "
+                "(mujoco-mjx[warp], warp-lang)"
+            ) from err
+        warp.config.quiet = True  # no banner on stdout when Warp starts
+        self.mj_model = mj_model
+        self.n_substeps = n_substeps
+        self.contact_distance = contact_distance
+        self.actuated_qadr = _actuated_qpos_adr(mj_model)
+        m = native_model(mj_model, contact_distance)
+        # Warp refuses the flag; it only changes what a blow-up does (NaN ends the episode).
+        m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+        self.native_model = m
+        model = mjx.put_model(m, impl="warp")
+        # Warp prints a warning whenever the solver stops at its iteration limit, as the
+        # scene's 4 iterations routinely do in contact (native MuJoCo stays silent); the
+        # warnings of overflowing buffers (contacts, constraint rows) stay on.
+        from mujoco.mjx.third_party.mujoco_warp import OverflowType
+
+        # Its contact sensors consider 64 contacts by default; the closest-contact sensor
+        # matches every agent-target contact, more than 64 with the hands pressed together.
+        impl = model.opt._impl.replace(
+            warn_overflow=int(model.opt._impl.warn_overflow) & ~int(OverflowType.ITERATIONS),
+            contact_sensor_maxmatch=WARP_SENSOR_MATCHES,
+        )
+        self.warp_model = model.replace(opt=model.opt.replace(_impl=impl))
+        # Warp allocates contacts for the whole batch at once (naconmax spans all worlds),
+        # constraint rows per world (njmax).
+        self.template = mjx.make_data(m, impl="warp", naconmax=contacts, njmax=constraints)
+
+    def _data(self, state: NativeState):
+        return self.template.replace(
+            qpos=state.qpos,
+            qvel=state.qvel,
+            ctrl=state.ctrl,
+            mocap_pos=state.mocap_pos,
+            mocap_quat=state.mocap_quat,
+            time=state.time,
+        )
+
+    def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> NativeState:
+        m = self.mj_model
+        state = NativeState(
+            qpos=qpos,
+            qvel=jnp.zeros(m.nv, jnp.float32),
+            ctrl=qpos[self.actuated_qadr],
+            mocap_pos=mocap_pos,
+            mocap_quat=mocap_quat,
+            time=jnp.zeros((), jnp.float32),
+            sensordata=jnp.zeros(m.nsensordata, jnp.float32),
+        )
+        data = mjx.forward(self.warp_model, self._data(state))
+        return state.replace(sensordata=data.sensordata)
+
+    def step(self, state: NativeState, ctrl: jax.Array) -> NativeState:
+        state = state.replace(ctrl=ctrl)
+        data = jax.lax.fori_loop(
+            0, self.n_substeps, lambda _, d: mjx.step(self.warp_model, d), self._data(state)
+        )
+        return state.replace(
+            qpos=data.qpos, qvel=data.qvel, time=data.time, sensordata=data.sensordata
+        )
+
+    def readings(self, state: NativeState) -> Readings:
+        return sensor_readings(state, self.contact_distance)
+
+
 def make_physics(
     name: str, mj_model: mujoco.MjModel, n_substeps: int, contact_distance: float
-) -> MjxPhysics | NativePhysics:
+) -> MjxPhysics | NativePhysics | WarpPhysics:
     """The physics ``name`` ('mjx', 'native' or 'auto': native on CPUs, MJX elsewhere)."""
     if name == "auto":
         name = "native" if jax.default_backend() == "cpu" else "mjx"
@@ -361,4 +465,6 @@ def make_physics(
         return MjxPhysics(mj_model, n_substeps, contact_distance)
     if name == "native":
         return NativePhysics(mj_model, n_substeps, contact_distance)
+    if name == "warp":
+        return WarpPhysics(mj_model, n_substeps, contact_distance)
     raise ValueError(f"unknown physics {name!r}; expected one of auto, {', '.join(PHYSICS)}")
