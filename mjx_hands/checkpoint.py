@@ -31,6 +31,8 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
+from mjx_hands import cluster
+
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, unreadable, or does not fit the current configuration."""
@@ -46,10 +48,19 @@ DIGEST_FILE = "digest.json"
 METADATA_FILE = Path("metadata") / "metadata"  # Orbax's JsonSave of the record
 
 
-def _leaves(tree) -> tuple[list[str], list[np.ndarray], Any]:
+def _leaves(tree) -> tuple[list[str], list[Any], Any]:
+    """Paths and host arrays of ``tree``; arrays split over several processes (a run
+    spread over hosts, ``mjx_hands.cluster``) stay as they are: each process writes its
+    part of them."""
     with_path, treedef = jax.tree_util.tree_flatten_with_path(tree)
     paths = [jax.tree_util.keystr(p) for p, _ in with_path]
-    return paths, [np.asarray(x) for _, x in with_path], treedef
+    return paths, [_host(x) for _, x in with_path], treedef
+
+
+def _host(x):
+    if isinstance(x, jax.Array) and not x.is_fully_addressable:
+        return x
+    return np.asarray(jax.device_get(x))
 
 
 def _drop_metadata_notice(record: logging.LogRecord) -> bool:
@@ -71,7 +82,8 @@ def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp
     # Saves wait until written, so Orbax's defensive copy of every host array (1.25 s of a
     # 3.4 s save of that state, profiled) is not needed.
     arrays = ocp.type_handlers.create_type_handler_registry(
-        (np.ndarray, ocp.type_handlers.NumpyHandler(deepcopy_host_arrays=False))
+        (np.ndarray, ocp.type_handlers.NumpyHandler(deepcopy_host_arrays=False)),
+        (jax.Array, ocp.type_handlers.ArrayHandler()),  # split over processes
     )
     handlers = {
         "state": ocp.PyTreeCheckpointHandler(
@@ -87,7 +99,7 @@ def _manager(directory: Path, max_to_keep: int = 3, create: bool = False) -> ocp
 def save(directory: Path, step: int, state, metadata: dict[str, Any], max_to_keep: int = 3) -> None:
     """Write ``state`` (any pytree of arrays) and ``metadata`` (JSON-able) as ``step``;
     the oldest steps beyond ``max_to_keep`` are deleted once it is complete."""
-    paths, leaves, _ = _leaves(jax.device_get(state))
+    paths, leaves, _ = _leaves(state)
     record = dict(metadata) | {"format": FORMAT}
     record["leaves"] = [
         {"path": p, "shape": list(x.shape), "dtype": str(x.dtype)} for p, x in zip(paths, leaves)
@@ -102,7 +114,9 @@ def save(directory: Path, step: int, state, metadata: dict[str, Any], max_to_kee
             ),
         )
         manager.wait_until_finished()
-    _write_digest(Path(directory).absolute() / str(step))
+    if cluster.is_primary():  # every process saved its part (Orbax waited for all)
+        _write_digest(Path(directory).absolute() / str(step))
+    cluster.barrier(f"digest {directory} {step}")
 
 
 def _file_digests(step_dir: Path) -> dict[str, str]:
@@ -315,11 +329,12 @@ def discard_after(directory: Path, step: int) -> list[int]:
     ``<directory>.damaged/`` for inspection. Returns the removed steps."""
     directory = Path(directory)
     newer = [s for s in steps(directory) if s > step]
-    for s in newer:
+    for s in newer if cluster.is_primary() else []:  # the folder all processes share
         if damage(directory, s) is None:
             shutil.rmtree(directory / str(s))
         else:
             aside = directory.with_name(directory.name + ".damaged")
             aside.mkdir(exist_ok=True)
             shutil.move(directory / str(s), aside / f"{s}-{os.getpid()}")
+    cluster.barrier(f"discard {directory} {step}")
     return newer

@@ -44,6 +44,7 @@ from mjx_hands import (
     train_config,
     training,
 )
+from mjx_hands import cluster as cluster_lib
 from mjx_hands.grids import GRID_FILE, HEADLINE, load_grid, read_rows
 from mjx_hands.statistics import ALPHA, holm, mean_se, welch
 
@@ -64,6 +65,10 @@ class GridConfig:
     """Seeds per variant: --seed, --seed + 1, ..."""
     train: Annotated[train_config.TrainConfig, tyro.conf.arg(name="")] = train_config.TrainConfig()
     """Everything else, as train.py takes it."""
+    cluster: cluster_lib.ClusterConfig = cluster_lib.ClusterConfig()
+    """Spread the grid's devices over processes and hosts (README, "Running on a
+    cluster"); not part of the grid's record: a grid resumes on any layout of the same
+    number of devices."""
 
 
 def members(grid: GridConfig) -> list[tuple[str, Any]]:
@@ -139,6 +144,7 @@ def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any
             for v, c in pairs
         ],
         "train": train_config.config_to_json(dataclasses.replace(grid.train, resume=False)),
+        "processes": cluster_lib.processes(),  # of the last (re)start, for the record
     }
     if grid.train.resume:
         saved = json.loads((run_dir / GRID_FILE).read_text())
@@ -159,14 +165,16 @@ def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any
         file=out,
         flush=True,
     )
-    configs = [c for _, c in pairs]
-    # Refusals (existing runs, resume mismatches) come before anything is written.
-    for config in configs:
+    # Refusals (existing runs, resume mismatches) come before anything is written; every
+    # process checks every member, so all refuse alike.
+    for _, config in pairs:
         run_directory.RunDirectory(config).check()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / GRID_FILE).write_text(json.dumps(record, indent=2))
+    cluster_lib.barrier("grid checked")
+    if cluster_lib.is_primary():
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / GRID_FILE).write_text(json.dumps(record, indent=2))
     labels = [v for v, _ in pairs]
-    summaries = training.run_population(configs, out, env_factory, labels=labels)
+    summaries = training.run_population([c for _, c in pairs], out, env_factory, labels=labels)
     return [s | {"variant": v} for s, (v, _) in zip(summaries, pairs)]
 
 
@@ -181,6 +189,8 @@ progress line shows each variant's mean evaluation success at the end of the epi
 
 def run_main(argv: list[str]) -> int:
     def start() -> tuple[list[dict[str, Any]], GridConfig]:
+        if "--help" not in argv and "-h" not in argv:  # before the preset asks for devices
+            cluster_lib.join(cluster_lib.early_config(argv))
         default = _grid_default(argv)
         grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
         compile_cache.enable()
@@ -190,6 +200,8 @@ def run_main(argv: list[str]) -> int:
     if code:
         return code
     summaries, grid = result
+    if not cluster_lib.is_primary():
+        return 0  # process 0 reports (every process holds the same evaluations)
     by_variant: dict[str, list[float]] = {}
     for s in summaries:
         by_variant.setdefault(s["variant"], []).append(s["final_eval"].get(HEADLINE, math.nan))

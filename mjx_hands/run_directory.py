@@ -14,16 +14,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mjx_hands import checkpoint, train_config
+from mjx_hands import checkpoint, cluster, train_config
 
 BEST_DIR = "best"  # run_dir/best: the learner of the best evaluation, for evaluate --best
 
 
 class MetricsLog:
-    """metrics.csv + TensorBoard events in the run directory; appends on resume."""
+    """metrics.csv + TensorBoard events in the run directory; appends on resume.
+    ``write=False`` keeps the rows in memory only (the processes of a run spread over
+    several, but the first: ``mjx_hands.cluster``)."""
 
-    def __init__(self, run_dir: Path):
+    def __init__(self, run_dir: Path, write: bool = True):
         self.path = run_dir / "metrics.csv"
+        self.write = write
         self.rows: list[dict[str, float]] = []
         if self.path.exists():
             with self.path.open() as f:
@@ -31,15 +34,16 @@ class MetricsLog:
                     {k: float(v) for k, v in r.items() if v not in ("", None) and k is not None}
                     for r in csv.DictReader(f)
                 ]
-        try:
+        self.tb = None
+        if write:
             from tensorboardX import SummaryWriter
 
             self.tb = SummaryWriter(str(run_dir / "tensorboard"))
-        except ImportError:  # pragma: no cover - tensorboardX is a dependency
-            self.tb = None
 
     def append(self, row: dict[str, float]) -> None:
         self.rows.append(row)
+        if not self.write:
+            return
         keys: list[str] = []
         for r in self.rows:
             keys += [k for k in r if k not in keys]
@@ -178,9 +182,13 @@ class RunDirectory:
     def open(self, start_epoch: int) -> None:
         """Write config.json (the run is known to start) and open the metrics log, keeping
         the rows up to ``start_epoch``."""
-        self.path.mkdir(parents=True, exist_ok=True)
-        self.config_path.write_text(json.dumps(train_config.config_to_json(self.config), indent=2))
-        self.log = MetricsLog(self.path)
+        primary = cluster.is_primary()
+        if primary:
+            self.path.mkdir(parents=True, exist_ok=True)
+            self.config_path.write_text(
+                json.dumps(train_config.config_to_json(self.config), indent=2)
+            )
+        self.log = MetricsLog(self.path, write=primary)
         self.log.rows = [r for r in self.log.rows if r.get("epoch", 0) <= start_epoch]
         self.best = max(
             (r for r in self.log.rows if "eval/success" in r), key=eval_rank, default=None
@@ -193,7 +201,9 @@ class RunDirectory:
         """Whether best/ holds an intact policy of ``epoch``; a damaged one is set aside."""
         if epoch not in checkpoint.steps(self.best_dir):
             return False
-        if checkpoint.damage(self.best_dir, epoch) is None:
+        intact = checkpoint.damage(self.best_dir, epoch) is None
+        cluster.barrier(f"looked at {self.best_dir}")  # every process, before one deletes
+        if intact:
             return True
         checkpoint.discard_after(self.best_dir, epoch - 1)
         return False
@@ -236,6 +246,8 @@ class RunDirectory:
         if self.log is None:
             return
         self.log.close()
+        if not cluster.is_primary():
+            return
         env = self.config.env
         title = f"{env.task} ({self.config.algo}, {env.reward}"
         title += ")" if env.imitation else ", no imitation)"

@@ -67,7 +67,7 @@ def make_learner(
 @functools.lru_cache(maxsize=4)
 def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
     config = members[0]
-    num_devices = len(devices or jax.local_devices())  # this host's share of the batch
+    num_devices = len(devices or jax.devices())  # batches are split over every process's
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
     setup = learners.LearnerSetup(
         config=config,
@@ -99,7 +99,7 @@ def run_services(config: TrainConfig, out=None, env_factory=None) -> learners.Ru
 def memory_use() -> dict[str, float]:
     """Host memory now and at its peak, and device memory where the device counts it
     (accelerators; CPU does not), GiB: logged every epoch so growth shows."""
-    stats = jax.devices()[0].memory_stats() or {}
+    stats = jax.local_devices()[0].memory_stats() or {}
     use = {
         f"memory/device_{name}_gib": stats[key] / 2**30
         for name, key in (("peak", "peak_bytes_in_use"), ("in_use", "bytes_in_use"))
@@ -344,7 +344,9 @@ def _setup_line(config: TrainConfig, runs: list[RunDirectory], algo, single, lau
     return (
         f"{config.env.task}: {single.describe()}, "
         f"{config.num_envs} envs{' per run' if len(runs) > 1 else ''} on {algo.num_devices} "
-        f"{jax.default_backend()} device(s), episode {single.episode_length} steps, "
+        f"{jax.default_backend()} device(s)"
+        f"{f' of {jax.process_count()} processes' if jax.process_count() > 1 else ''}, "
+        f"episode {single.episode_length} steps, "
         f"run dir {where} ({time.perf_counter() - launched:.0f} s)"
     )
 

@@ -9,8 +9,10 @@ environments as one batch, and evaluating a deterministic policy. A learner (DDP
 plug-in registered in ``mjx_hands.learners``) adds its state, its epoch and its
 checkpoint layout.
 
-Multi-host: the pmap spans all hosts' devices when ``devices`` is None (each host feeds
-its local ones, keys folded by ``jax.process_index()``).
+Multi-host (``mjx_hands.cluster``): the pmap spans every process's devices when
+``devices`` is None; each process feeds and holds the rows of its own devices
+(:attr:`Population.local_rows`), and its keys are its rows of the keys one process with
+all the devices would draw, so the layout of devices over processes changes nothing.
 """
 
 from __future__ import annotations
@@ -102,8 +104,13 @@ class Population:
         self.members = members
         self.member_info = member_info
         self.pmap_devices = devices
-        self.devices = devices or jax.local_devices()
+        self.devices = devices or jax.devices()
+        """Every device of the pmap, on every process."""
         self.num_devices = len(self.devices)
+        me = jax.process_index()
+        self.local_rows = np.array([i for i, d in enumerate(self.devices) if d.process_index == me])
+        """The rows of the device axis this process holds (all of them for one process)."""
+        self.distributed = len(self.local_rows) < self.num_devices
         # Host arrays with a leading device axis -> one shard per device, laid out exactly
         # as a pmap's outputs (same mesh axis name), so jit sees no new input sharding.
         self.to_devices = self.pmap(lambda tree: tree)
@@ -121,9 +128,39 @@ class Population:
             rng = rng[None]
         if rng.shape[0] != self.members:
             raise ValueError(f"{what} needs one key per member ({self.members}), got {rng.shape}")
-        rng = jax.vmap(lambda k: jax.random.fold_in(k, jax.process_index()))(rng)
+        # fold_in 0: what each host folded in its index before the rows were split.
+        rng = jax.vmap(lambda k: jax.random.fold_in(k, 0))(rng)
         keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
-        return jnp.swapaxes(keys, 0, 1)
+        return jnp.swapaxes(keys, 0, 1)[self.local_rows]
+
+    def take_member(self, tree, index: int):
+        """Member ``index`` of a population state on the devices (leaves (devices,
+        members, ...) -> (devices, ...), this process's rows): a pmap, since arrays split
+        over several processes cannot be sliced directly."""
+        return self._take(tree, np.int32(index))
+
+    @functools.cached_property
+    def _take(self):
+        return self.pmap(lambda tree, i: jax.tree.map(lambda x: x[i], tree), in_axes=(0, None))
+
+    def global_rows(self, tree):
+        """Host leaves holding this process's rows of the device axis (local devices, ...)
+        -> arrays of every process's rows (devices, ...), as the collective checkpoint
+        writes them; unchanged for one process."""
+        if not self.distributed:
+            return tree
+        from jax.experimental import multihost_utils
+        from jax.sharding import Mesh, PartitionSpec
+
+        mesh = Mesh(np.array(self.devices), (AXIS,))
+        return multihost_utils.host_local_array_to_global_array(tree, mesh, PartitionSpec(AXIS))
+
+    def own_rows(self, tree):
+        """Inverse of :func:`global_rows` for restored host arrays: (devices, ...) -> this
+        process's rows (local devices, ...); unchanged for one process."""
+        if not self.distributed:
+            return tree
+        return jax.tree.map(lambda x: np.asarray(x)[self.local_rows], tree)
 
     def reset(self, env, keys: jax.Array):
         """Each member's batch of fresh episodes: keys (members, 2) -> leaves (members, n, ...)."""

@@ -308,22 +308,39 @@ class DDPG:
         """What a run's checkpoint holds: member ``index`` of the population, leaves with a
         leading device axis (the learner replicated, so device 0's copy). Also for
         abstract (``jax.eval_shape``) states, as the structure to restore into."""
-        one = member(state, index)
-        tree = {
-            "learner": jax.tree.map(first_device, one.learner),
-            "env_state": one.env_state,
-            "stats": one.stats,
-            "rng": one.rng,
-            "env_steps": one.env_steps,
-        }
+        one = self._member(state, index)
+        split = {"env_state": one.env_state, "stats": one.stats, "rng": one.rng}
+        split["env_steps"] = one.env_steps
         if save_replay:
-            tree["buffer"] = one.buffer
-        return tree
+            split["buffer"] = one.buffer
+        return {"learner": jax.tree.map(first_device, one.learner)} | self._all_rows(split)
+
+    def _member(self, state: TrainerState, index: int) -> TrainerState:
+        """Member ``index`` with a leading device axis: abstract, on this process's devices,
+        or, across processes, this process's rows on the host."""
+        population = self.population
+        if not population.distributed or isinstance(
+            jax.tree.leaves(state)[0], jax.ShapeDtypeStruct
+        ):
+            return member(state, index)
+        return jax.device_get(population.take_member(state, index))
+
+    def _all_rows(self, tree):
+        """Across processes, the device-split leaves of a checkpoint hold every process's
+        rows (abstract: their shape; concrete: arrays all processes write together)."""
+        population = self.population
+        if not population.distributed:
+            return tree
+        leaves = jax.tree.leaves(tree)
+        if isinstance(leaves[0], jax.ShapeDtypeStruct):
+            n = population.num_devices
+            return jax.tree.map(lambda x: jax.ShapeDtypeStruct((n,) + x.shape[1:], x.dtype), tree)
+        return population.global_rows(tree)
 
     def policy_tree(self, state: TrainerState, index: int = 0) -> dict[str, Any]:
         """What a policy needs (the learner: networks, targets, normaliser); no env or
         buffer."""
-        return {"learner": jax.tree.map(first_device, member(state, index).learner)}
+        return {"learner": jax.tree.map(first_device, self._member(state, index).learner)}
 
     def load_policy(self, ckpt_dir, step: int, verified: bool = False):
         """(act, learner, epoch) of the policy a checkpoint folder (a run's ``checkpoints``
@@ -343,20 +360,21 @@ class DDPG:
     ) -> TrainerState:
         """The population state of one :meth:`checkpoint_tree` per member; what a tree
         lacks (a buffer not saved) comes from ``fresh``."""
-        n = self.num_devices
+        n = len(self.population.local_rows)
         members = []
         for index, tree in enumerate(trees):
-            fresh_member = member(fresh, index)
+            fresh_member = self._member(fresh, index)
+            mine = self.population.own_rows({k: v for k, v in tree.items() if k != "learner"})
             members.append(
                 fresh_member.replace(
                     learner=jax.tree.map(
                         lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"]
                     ),
-                    env_state=tree["env_state"],
-                    stats=tree["stats"],
-                    rng=tree["rng"],
-                    env_steps=tree["env_steps"],
-                    buffer=tree.get("buffer", fresh_member.buffer),
+                    env_state=mine["env_state"],
+                    stats=mine["stats"],
+                    rng=mine["rng"],
+                    env_steps=mine["env_steps"],
+                    buffer=mine.get("buffer", fresh_member.buffer),
                 )
             )
         # Laid out as the epoch's outputs: any other sharding retraces (and recompiles).
