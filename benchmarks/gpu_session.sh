@@ -10,11 +10,12 @@
 #   STAGES=target BUDGET_S=560 bash benchmarks/gpu_session.sh    # handshake: minutes to 90 % from launch
 #   STAGES=paper BUDGET_S=560 bash benchmarks/gpu_session.sh     # --profile paper Fig. 4, 5 seeds
 #   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
+#   STAGES=physics BUDGET_S=560 bash benchmarks/gpu_session.sh   # MJX, Warp, native: time + train
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
 #
-#   DRY_RUN=1 STAGES="throughput train grid learners target paper" bash benchmarks/gpu_session.sh
+#   DRY_RUN=1 STAGES="throughput train grid learners target paper physics" bash benchmarks/gpu_session.sh
 #
 # runs every stage at tiny sizes on any machine (CPU included) to the same files: CI does,
 # so the script cannot rot between GPU sessions.
@@ -36,6 +37,7 @@ if [ "$DRY_RUN" = 1 ]; then
     --ddpg.unroll-length 2 --ddpg.iterations-per-epoch 1 --ddpg.updates-per-iteration 2
     --ddpg.hidden-sizes 16 16"
   BATCHES=${BATCHES:-4} ENV_STEP_BATCHES=${ENV_STEP_BATCHES:-4} CONTROL_STEPS=${CONTROL_STEPS:-2}
+  PHYSICS_BATCH=${PHYSICS_BATCH:-4}
   GRID_SEEDS=${GRID_SEEDS:-1} PAPER_SEEDS=${PAPER_SEEDS:-1} GRID_TASKS=${GRID_TASKS:-et}
   PAPER_TASKS=${PAPER_TASKS:-et} LEARNER_SEEDS=${LEARNER_SEEDS:-1} TIME_MINUTES=0.5
 fi
@@ -75,6 +77,35 @@ train() {
   timeout -s INT "$((left - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
     --max-minutes "$minutes" --run-dir /tmp/gpu_run ${TRAIN_ARGS:-} $TINY 2>&1 | tee "$OUT/train.log"
   for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run/$f" "$OUT/" 2>/dev/null; done
+}
+
+warp_ready() {
+  python3 -c "import warp" 2>/dev/null || {
+    echo "   MuJoCo Warp is not installed (pip install -e '.[warp]', or warp-lang's wheel in $WHEELS): skipped" | tee -a "$OUT/session.log"
+    return 1
+  }
+}
+
+physics() {
+  # The three physics behind the one environment: env.step throughput side by side at one
+  # batch, then the handshake trained on each with an equal share of what is left.
+  echo "== physics: MJX, MuJoCo Warp and native side by side" | tee -a "$OUT/session.log"
+  warp=""; impls="mjx native"
+  if warp_ready; then warp="--warp"; impls="mjx warp native"; fi
+  # shellcheck disable=SC2086  # $warp is one flag or none
+  timeout "$THROUGHPUT_S" python3 -m benchmarks.throughput --batch-sizes "${PHYSICS_BATCH:-4096}" \
+    --control-steps "${CONTROL_STEPS:-20}" $warp --out "$OUT/results_physics.json" 2>&1 | tee "$OUT/physics_throughput.log"
+  for impl in $impls; do
+    left=$((BUDGET_S - SECONDS)); share=$((left / $(wc -w <<< "$impls")))
+    minutes=$(python3 -c "print(max(0.5, ($share - 90) / 60))")
+    impls=${impls#* }  # the ones after this
+    echo "== physics: training on $impl, --max-minutes $minutes" | tee -a "$OUT/session.log"
+    rm -rf "/tmp/gpu_run_$impl"; mkdir -p "$OUT/physics/$impl"
+    # shellcheck disable=SC2086  # TINY holds several flags
+    timeout -s INT "$((share - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
+      --physics "$impl" --max-minutes "$minutes" --run-dir "/tmp/gpu_run_$impl" $TINY 2>&1 | tee "$OUT/physics/$impl/train.log"
+    for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run_$impl/$f" "$OUT/physics/$impl/" 2>/dev/null; done
+  done
 }
 
 grids_by_task() {
@@ -177,11 +208,12 @@ target() {
 declare -A RESULT=(
   [throughput]=results_gpu.json [train]=metrics.csv [grid]=fig4/summary.json
   [learners]=learners [target]=results_time_to_target_gpu.json [paper]=paper-fig4/summary.json
+  [physics]=physics/native/metrics.csv
 )
 for stage in $STAGES; do
   case $stage in
-    throughput|train|grid|learners|target|paper) "$stage" ;;
-    *) echo "unknown stage $stage; expected throughput, train, grid, learners, target or paper" >&2; exit 2 ;;
+    throughput|train|grid|learners|target|paper|physics) "$stage" ;;
+    *) echo "unknown stage $stage; expected throughput, train, grid, learners, target, paper or physics" >&2; exit 2 ;;
   esac
 done
 echo "== done after ${SECONDS} s" | tee -a "$OUT/session.log"

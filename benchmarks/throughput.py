@@ -126,8 +126,9 @@ def measure_mjx(
 def measure_native_env(
     env: env_lib.HandInteractionEnv, mjx_state, actions: jax.Array
 ) -> dict:
-    """env.step control steps/s of the batch on native physics, from the MJX episodes
-    ``mjx_state`` (their physics state posed natively) under the same ``actions``."""
+    """env.step control steps/s of the batch on ``env``'s physics (native MuJoCo or MuJoCo
+    Warp), from the MJX episodes ``mjx_state`` (their physics state posed by it) under the
+    same ``actions``."""
     batch = actions.shape[1]
     benv = env_lib.BatchedEnv(env, batch)
     d = mjx_state.pipeline_state
@@ -227,6 +228,11 @@ def main(argv: list[str] | None = None) -> dict:
         action="store_true",
         help="skip env.step on native physics (timed at the env.step batches by default)",
     )
+    parser.add_argument(
+        "--warp",
+        action="store_true",
+        help="also time env.step on MuJoCo Warp at the env.step batches (the [warp] extra)",
+    )
     parser.add_argument("--out", default=None, help="JSON file to write")
     args = parser.parse_args(argv)
     if args.quick:
@@ -235,6 +241,9 @@ def main(argv: list[str] | None = None) -> dict:
     env = env_lib.make_env(args.task, mocap_source="synthetic", physics="mjx")
     native_env = None if args.no_native_env else env_lib.make_env(
         args.task, mocap_source="synthetic", physics="native"
+    )
+    warp_env = (
+        env_lib.make_env(args.task, mocap_source="synthetic", physics="warp") if args.warp else None
     )
     nthread = min(2, os.cpu_count() or 1) if args.quick else os.cpu_count() or 1
     report = {
@@ -257,6 +266,11 @@ def main(argv: list[str] | None = None) -> dict:
         actions, mjx_state = res.pop("_actions"), res.pop("_state", None)
         if native_env is not None and mjx_state is not None:
             res["native_env"] = measure_native_env(native_env, mjx_state, actions)
+        if warp_env is not None and mjx_state is not None:
+            res["warp_env"] = measure_native_env(warp_env, mjx_state, actions)
+            res["warp_env"]["over_mjx_env_step"] = (
+                res["warp_env"]["env_control_steps_per_s"] / res["env_control_steps_per_s"]
+            )
         native = measure_native(env, res.pop("_start"), actions, nthread)
         # Same starts, same set-points: the two simulators must end in nearly the same pose.
         res |= qpos_gaps(res.pop("_qpos"), native.pop("_qpos"))
