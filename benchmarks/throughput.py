@@ -123,7 +123,7 @@ def measure_mjx(
     return result | {"_start": starts, "_actions": actions, "_qpos": np.asarray(final.qpos)}
 
 
-def measure_native_env(
+def measure_env_step(
     env: env_lib.HandInteractionEnv, mjx_state, actions: jax.Array
 ) -> dict:
     """env.step control steps/s of the batch on ``env``'s physics (native MuJoCo or MuJoCo
@@ -265,9 +265,9 @@ def main(argv: list[str] | None = None) -> dict:
         )
         actions, mjx_state = res.pop("_actions"), res.pop("_state", None)
         if native_env is not None and mjx_state is not None:
-            res["native_env"] = measure_native_env(native_env, mjx_state, actions)
+            res["native_env"] = measure_env_step(native_env, mjx_state, actions)
         if warp_env is not None and mjx_state is not None:
-            res["warp_env"] = measure_native_env(warp_env, mjx_state, actions)
+            res["warp_env"] = measure_env_step(warp_env, mjx_state, actions)
             res["warp_env"]["over_mjx_env_step"] = (
                 res["warp_env"]["env_control_steps_per_s"] / res["env_control_steps_per_s"]
             )

@@ -329,6 +329,7 @@ def discard_after(directory: Path, step: int) -> list[int]:
     ``<directory>.damaged/`` for inspection. Returns the removed steps."""
     directory = Path(directory)
     newer = [s for s in steps(directory) if s > step]
+    cluster.barrier(f"read {directory}")  # no process may still be hashing what goes
     for s in newer if cluster.is_primary() else []:  # the folder all processes share
         if damage(directory, s) is None:
             shutil.rmtree(directory / str(s))

@@ -1,4 +1,5 @@
-"""Grids (and single runs) over several processes and hosts, with ``jax.distributed``.
+"""Experiment grids over several processes and hosts, with ``jax.distributed`` (a single
+run is a grid of one member).
 
 Multi-controller JAX: every process runs the same program on its own devices, the
 population's ``pmap`` spans the devices of all of them, so each process steps its share
@@ -123,3 +124,18 @@ def barrier(name: str) -> None:
         from jax.experimental import multihost_utils
 
         multihost_utils.sync_global_devices(name)
+
+
+def agree(value):
+    """Process 0's ``value`` (a bool or a NumPy array) on every process: decisions that
+    lead to collectives (stop, save, a member diverged) must not differ between processes
+    whose clocks or per-device metrics do."""
+    import jax
+    import numpy as np
+
+    if jax.process_count() == 1:
+        return value
+    from jax.experimental import multihost_utils
+
+    agreed = np.asarray(multihost_utils.broadcast_one_to_all(np.asarray(value)))
+    return bool(agreed) if isinstance(value, bool) else agreed

@@ -27,6 +27,7 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -194,7 +195,9 @@ def run_main(argv: list[str]) -> int:
         default = _grid_default(argv)
         grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
         compile_cache.enable()
-        return run_grid(grid), grid
+        # One progress log: the other processes train the same members.
+        out = None if cluster_lib.is_primary() else open(os.devnull, "w")  # noqa: SIM115
+        return run_grid(grid, out), grid
 
     result, code = train_cli.reported(start)
     if code:

@@ -135,6 +135,10 @@ class LearnerEntry:
     summary."""
     load_policy: Callable[[Any, Any, Any], tuple[Any, Any]] | None = None
     """Standalone learner: ``(run_dir, config, single) -> (act, params)``."""
+    across_processes: bool = False
+    """Population learner: its checkpoint trees hold every process's rows of the
+    device-split state (``Population.take_member`` / ``global_rows`` / ``own_rows``), so
+    it trains over several processes (``mjx_hands.cluster``)."""
 
     def __post_init__(self):
         if (self.build is None) == (self.run is None):
@@ -193,13 +197,14 @@ def _brax(function: str) -> Callable:
     return call
 
 
-register(LearnerEntry("ddpg", "the paper's DDPG", build=_ddpg))
+register(LearnerEntry("ddpg", "the paper's DDPG", build=_ddpg, across_processes=True))
 register(
     LearnerEntry(
         "ddpg-ln",
         "DDPG with LayerNorm in every hidden layer (the evidence's pick)",
         build=_ddpg,
         ddpg_options={"layer_norm": True},
+        across_processes=True,
     )
 )
 register(
@@ -216,6 +221,7 @@ register(
             "n_step": 3,
             "layer_norm": True,
         },
+        across_processes=True,
     )
 )
 for _name in ("sac", "ppo"):

@@ -46,9 +46,11 @@ from mjx_hands import scene
 from mjx_hands import shadow_hand as sh
 
 PHYSICS = ("mjx", "native", "warp")
-WARP_CONTACTS = 1 << 16
-"""Contacts MuJoCo Warp keeps room for, summed over the batch (its ``naconmax``): the hand
-pair makes ~10 per world in contact; 256 for 400 worlds overflowed (a printed warning)."""
+WARP_CONTACTS_PER_WORLD = 64
+"""Contacts MuJoCo Warp keeps room for per simulation: the hand pair made up to 31 with
+the hands pressed together; 256 for 400 worlds overflowed (a printed warning)."""
+WARP_WORLDS = 1024
+"""Simulations one Warp call steps unless told more (:meth:`WarpPhysics.reserve`)."""
 WARP_SENSOR_MATCHES = 128
 """Contacts a MuJoCo Warp contact sensor considers (64 overflowed in training; the hands
 pressed together made 35; it sizes buffers of ~50 kB per world)."""
@@ -230,6 +232,26 @@ class NativeState:
     sensordata: jax.Array  # (nsensordata,) of the last substep's kinematics
 
 
+def rest_state(
+    m: mujoco.MjModel,
+    actuated_qadr: np.ndarray,
+    qpos: jax.Array,
+    mocap_pos: jax.Array,
+    mocap_quat: jax.Array,
+) -> NativeState:
+    """At rest at ``qpos`` (nq,), set-points on the actuated joints, the target's mocap
+    bodies at ``mocap_pos`` / ``mocap_quat``; sensors not yet read (zeros)."""
+    return NativeState(
+        qpos=qpos,
+        qvel=jnp.zeros(m.nv, jnp.float32),
+        ctrl=qpos[actuated_qadr],
+        mocap_pos=mocap_pos,
+        mocap_quat=mocap_quat,
+        time=jnp.zeros((), jnp.float32),
+        sensordata=jnp.zeros(m.nsensordata, jnp.float32),
+    )
+
+
 def sensor_readings(state: NativeState, contact_distance: float) -> Readings:
     """The readings of a simulation whose engine computes the scene's sensors itself
     (native MuJoCo, MuJoCo Warp): from ``state.sensordata``."""
@@ -291,16 +313,7 @@ class NativePhysics:
 
     # ---------------------------------------------------------------- Physics
     def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> NativeState:
-        m = self.mj_model
-        state = NativeState(
-            qpos=qpos,
-            qvel=jnp.zeros(m.nv, jnp.float32),
-            ctrl=qpos[self.actuated_qadr],
-            mocap_pos=mocap_pos,
-            mocap_quat=mocap_quat,
-            time=jnp.zeros((), jnp.float32),
-            sensordata=jnp.zeros(m.nsensordata, jnp.float32),
-        )
+        state = rest_state(self.mj_model, self.actuated_qadr, qpos, mocap_pos, mocap_quat)
         # One step computes the sensors at the given pose before it integrates; the
         # integrated state is dropped.
         _, _, _, sensordata = self._rollout(state, 1)
@@ -373,7 +386,8 @@ class WarpPhysics:
     model's contacts and sensors, stepped by Warp kernels on the GPU (or Warp's CPU
     device). Its state is a :class:`NativeState`; every control period starts from a
     fresh Warp data holding that state, with a cold solver start, as the native step
-    does (``benchmarks/physics_agreement.py``: native to 3e-7 rad in contact)."""
+    does (``benchmarks/physics_agreement.py``: native to 3e-7 rad, median, in contact;
+    ``tests/test_physics.py``: at most 2e-5 on resting contacts)."""
 
     name = "warp"
 
@@ -382,7 +396,7 @@ class WarpPhysics:
         mj_model: mujoco.MjModel,
         n_substeps: int,
         contact_distance: float,
-        contacts: int = WARP_CONTACTS,
+        worlds: int = WARP_WORLDS,
         constraints: int = WARP_CONSTRAINTS,
     ):
         try:
@@ -414,9 +428,24 @@ class WarpPhysics:
             contact_sensor_maxmatch=WARP_SENSOR_MATCHES,
         )
         self.warp_model = model.replace(opt=model.opt.replace(_impl=impl))
-        # Warp allocates contacts for the whole batch at once (naconmax spans all worlds),
-        # constraint rows per world (njmax).
-        self.template = mjx.make_data(m, impl="warp", naconmax=contacts, njmax=constraints)
+        self.constraints = constraints
+        self.worlds = 0
+        self.reserve(worlds)
+
+    def reserve(self, worlds: int) -> None:
+        """Room for ``worlds`` simulations stepped in one call (a learner's members x
+        environments per device); before the program that steps them is traced. Warp
+        allocates contacts for the whole batch at once (``naconmax`` spans all worlds),
+        constraint rows per world (``njmax``)."""
+        if worlds <= self.worlds:
+            return
+        self.worlds = worlds
+        self.template = mjx.make_data(
+            self.native_model,
+            impl="warp",
+            naconmax=WARP_CONTACTS_PER_WORLD * worlds,
+            njmax=self.constraints,
+        )
 
     def _data(self, state: NativeState):
         return self.template.replace(
@@ -429,16 +458,7 @@ class WarpPhysics:
         )
 
     def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> NativeState:
-        m = self.mj_model
-        state = NativeState(
-            qpos=qpos,
-            qvel=jnp.zeros(m.nv, jnp.float32),
-            ctrl=qpos[self.actuated_qadr],
-            mocap_pos=mocap_pos,
-            mocap_quat=mocap_quat,
-            time=jnp.zeros((), jnp.float32),
-            sensordata=jnp.zeros(m.nsensordata, jnp.float32),
-        )
+        state = rest_state(self.mj_model, self.actuated_qadr, qpos, mocap_pos, mocap_quat)
         data = mjx.forward(self.warp_model, self._data(state))
         return state.replace(sensordata=data.sensordata)
 
@@ -458,7 +478,8 @@ class WarpPhysics:
 def make_physics(
     name: str, mj_model: mujoco.MjModel, n_substeps: int, contact_distance: float
 ) -> MjxPhysics | NativePhysics | WarpPhysics:
-    """The physics ``name`` ('mjx', 'native' or 'auto': native on CPUs, MJX elsewhere)."""
+    """The physics ``name`` ('mjx', 'native', 'warp' or 'auto': native on CPUs, MJX
+    elsewhere)."""
     if name == "auto":
         name = "native" if jax.default_backend() == "cpu" else "mjx"
     if name == "mjx":

@@ -14,6 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from mjx_hands import checkpoint, cluster, train_config
 
 BEST_DIR = "best"  # run_dir/best: the learner of the best evaluation, for evaluate --best
@@ -165,8 +167,8 @@ class RunDirectory:
         saved_devices = int(meta.get("num_devices", 1))
         if saved_devices != num_devices:
             raise checkpoint.CheckpointError(
-                f"--resume: {self.path} was trained on {saved_devices} device(s), this process "
-                f"has {num_devices}; resume with {saved_devices} (CPU: XLA_FLAGS="
+                f"--resume: {self.path} was trained on {saved_devices} device(s), this run "
+                f"has {num_devices} (over all its processes); resume with {saved_devices} (CPU: XLA_FLAGS="
                 f"--xla_force_host_platform_device_count={saved_devices})"
             )
         # The checkpoint's own setting says whether it holds the replay buffer.
@@ -199,12 +201,11 @@ class RunDirectory:
 
     def _best_saved(self, epoch: int) -> bool:
         """Whether best/ holds an intact policy of ``epoch``; a damaged one is set aside."""
-        if epoch not in checkpoint.steps(self.best_dir):
-            return False
-        intact = checkpoint.damage(self.best_dir, epoch) is None
-        cluster.barrier(f"looked at {self.best_dir}")  # every process, before one deletes
-        if intact:
-            return True
+        saved = epoch in checkpoint.steps(self.best_dir)
+        intact = saved and checkpoint.damage(self.best_dir, epoch) is None
+        saved, intact = cluster.agree(np.array([saved, intact]))  # process 0 judges for all
+        if intact or not saved:
+            return bool(intact)
         checkpoint.discard_after(self.best_dir, epoch - 1)
         return False
 

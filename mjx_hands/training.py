@@ -21,7 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from mjx_hands import checkpoint, learners, run_directory, train_config
+from mjx_hands import checkpoint, cluster, learners, run_directory, train_config
 from mjx_hands.run_directory import RunDirectory
 from mjx_hands.train_config import TrainConfig, check_population, program_config
 
@@ -69,6 +69,8 @@ def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
     config = members[0]
     num_devices = len(devices or jax.devices())  # batches are split over every process's
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
+    if getattr(single, "backend", None) == "warp":  # one Warp call steps every member's envs
+        single.physics.reserve(len(members) * max(train_env.num_envs, eval_env.num_envs))
     setup = learners.LearnerSetup(
         config=config,
         train_env=train_env,
@@ -170,18 +172,25 @@ def member_variants(single, configs: list[TrainConfig]) -> dict[str, Any] | None
     return {"reward_weights": jax.tree.map(lambda *xs: np.stack(xs), *weights)}
 
 
+def _non_finite(metrics_m: dict[str, float]) -> list[str]:
+    """A member's losses that turned non-finite (empty: none)."""
+    return sorted(k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v))
+
+
 def _newly_diverged(
     epoch: int, metrics: list[dict[str, float]], runs: list[RunDirectory], diverged: set[int]
 ) -> list[int]:
     """Members whose losses or parameters turned non-finite this epoch. A run alone stops
     (TrainingDiverged); in a population the others train on (members share no numbers),
-    and the diverged one keeps its last good checkpoint and logs no more."""
+    and the diverged one keeps its last good checkpoint and logs no more. Across
+    processes, process 0's verdict holds (the losses are its devices')."""
+    verdict = cluster.agree(
+        np.array([bool(_non_finite(m)) or m["train/params_finite"] < 1.0 for m in metrics])
+    )
     new = []
     for index, (metrics_m, run_m) in enumerate(zip(metrics, runs)):
-        bad = sorted(
-            k for k, v in metrics_m.items() if k.startswith("sgd/") and not math.isfinite(v)
-        )
-        if index in diverged or not (bad or metrics_m["train/params_finite"] < 1.0):
+        bad = _non_finite(metrics_m)
+        if index in diverged or not verdict[index]:
             continue
         message = (
             f"epoch {epoch}: training diverged (non-finite {bad or 'parameters'}) in "
@@ -248,6 +257,11 @@ def run_population(
     """
     check_population(configs)
     config = configs[0]
+    if jax.process_count() > 1 and not learners.entry(config.algo).across_processes:
+        raise ValueError(
+            f"--algo {config.algo} trains in one process only; across processes: "
+            + ", ".join(n for n, e in learners.REGISTRY.items() if e.across_processes)
+        )
     launched = time.perf_counter()  # wall clock from here includes the compiles
     runs = [RunDirectory(c) for c in configs]
     for r in runs:
@@ -290,7 +304,9 @@ def run_population(
             ]
             evaluate = epoch % config.eval_every == 0 or epoch == config.epochs
             elapsed = time.perf_counter() - started
-            out_of_time = config.max_minutes is not None and elapsed > 60 * config.max_minutes
+            out_of_time = cluster.agree(
+                config.max_minutes is not None and elapsed > 60 * config.max_minutes
+            )
             if evaluate or out_of_time:
                 keys = np.stack(
                     [
@@ -309,7 +325,7 @@ def run_population(
             line = _progress_line(epoch, config.epochs, rate, rows, labels)
             print(f"{line}  left ~{remaining / 60:.0f} min", file=out, flush=True)
             since_save = time.perf_counter() - last_save_time
-            if evaluate or out_of_time or _checkpoint_due(config, epoch, since_save):
+            if evaluate or out_of_time or cluster.agree(_checkpoint_due(config, epoch, since_save)):
                 with interrupts.deferred():
                     _save_members(algo, state, runs, rows, diverged, epoch)
                 last_save_time = time.perf_counter()

@@ -5,8 +5,9 @@
 
 The grid is 2 seeds of the full reward, 16 environments each over every device of every
 process. With one process it runs without ``jax.distributed`` (on as many devices as
-XLA_FLAGS gives it). ``--compare``: then print the largest difference between each
-member's last checkpoint and the same member's in OTHER_GRID_DIR (``COMPARE <diff>``).
+XLA_FLAGS gives it). ``--compare``: then compare every array of each member's last
+checkpoint with the same member's in OTHER_GRID_DIR (``COMPARE equal`` when all are equal,
+NaNs included, else ``COMPARE differ`` and the largest difference).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def main(argv: list[str]) -> None:
 
 def compare(grid: experiments.GridConfig, other: Path, epoch: int) -> None:
     """Each member's checkpoint of ``epoch`` here and in ``other``: every array."""
-    worst = 0.0
+    equal, worst = True, 0.0
     for index, (_, config) in enumerate(experiments.members(grid)):
         algo, _ = training.make_learner(config, env_factory=point_factory)
         like = algo.checkpoint_tree(algo.state_shapes, config.save_replay)
@@ -53,11 +54,11 @@ def compare(grid: experiments.GridConfig, other: Path, epoch: int) -> None:
         mine, _ = checkpoint.restore(run_dir / "checkpoints", like, epoch)
         theirs, _ = checkpoint.restore(other / run_dir.relative_to(grid.train.run_dir) / "checkpoints", like, epoch)
         for a, b in zip(jax.tree.leaves(mine), jax.tree.leaves(theirs)):
-            if np.issubdtype(a.dtype, np.floating):
-                worst = max(worst, float(np.max(np.abs(a - b), initial=0.0)))
-            elif not np.array_equal(a, b):
-                worst = float("inf")
-    print(f"COMPARE {worst}", flush=True)
+            floating = np.issubdtype(a.dtype, np.floating)
+            equal &= bool(np.array_equal(a, b, equal_nan=floating))
+            if floating:
+                worst = max(worst, float(np.nanmax(np.abs(a - b), initial=0.0)))
+    print(f"COMPARE {'equal' if equal else 'differ'} {worst}", flush=True)
 
 
 if __name__ == "__main__":

@@ -74,21 +74,23 @@ def _rows(run_dir: Path) -> list[dict[str, str]]:
 
 @pytest.mark.slow
 def test_two_processes_train_and_resume_a_grid_as_one_process_with_both_devices(tmp_path):
-    """Point reach, 2 members, 16 environments each over 2 CPU devices: two processes of
-    one device each (jax.distributed on this machine) train 2 epochs and resume to 3;
-    one process with both devices trains 3. Every member's metrics and its checkpoint of
-    epoch 3 (learner, environments, replay rows of both processes) are the same, bit for
+    """Point reach, 2 members, 16 environments each over 2 CPU devices. One process with
+    both devices trains 4 epochs. The same grid spread over two processes of one device
+    each (jax.distributed on this machine) trains 2 epochs, resumes to 3, and is resumed
+    to 4 by one process with both devices. Every member's metrics and its checkpoint of
+    epoch 4 (learner, environments, replay rows of both devices) are the same, bit for
     bit; process 0 alone wrote the grid record and the logs."""
     spread, alone = tmp_path / "spread", tmp_path / "alone"
+    _workers(alone, 4, 1, devices=2)
     _workers(spread, 2, 2)
     logs = _workers(spread, 3, 2, "--resume")
     assert all("resumed from epoch 2" in log for log in logs)
-    log = _workers(alone, 3, 1, "--compare", str(spread), devices=2)[0]
-    assert "COMPARE 0.0" in log, log[-2000:]
+    assert "tensorboard" not in logs[1] and '"processes": 2' in (spread / "grid.json").read_text()
+    assert len(list((spread / "full" / "seed0" / "tensorboard").iterdir())) == 2  # process 0's
+    log = _workers(spread, 4, 1, "--resume", "--compare", str(alone), devices=2)[0]
+    assert "resumed from epoch 3" in log and "COMPARE equal" in log, log[-2000:]
     for seed in (0, 1):
         member = Path("full") / f"seed{seed}"
         spread_rows, alone_rows = _rows(spread / member), _rows(alone / member)
-        assert [r["epoch"] for r in spread_rows] == ["1.0", "2.0", "3.0"]
+        assert [r["epoch"] for r in spread_rows] == ["1.0", "2.0", "3.0", "4.0"]
         assert spread_rows == alone_rows
-    assert '"processes": 2' in (spread / "grid.json").read_text()
-    assert len(list((spread / "full" / "seed0" / "tensorboard").iterdir())) == 2  # start, resume

@@ -834,7 +834,7 @@ def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
     config = _config(by_clock, epochs=3, resume=True)
     algo, _ = training.make_learner(config, env_factory=point_factory)
     with pytest.raises(
-        checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this process has 2"
+        checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this run has 2"
     ):
         two_devices = types.SimpleNamespace(num_devices=2, checkpoint_tree=algo.checkpoint_tree)
         run_directory.RunDirectory(config).restore(

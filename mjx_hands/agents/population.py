@@ -110,6 +110,11 @@ class Population:
         me = jax.process_index()
         self.local_rows = np.array([i for i, d in enumerate(self.devices) if d.process_index == me])
         """The rows of the device axis this process holds (all of them for one process)."""
+        if np.any(np.diff(self.local_rows) != 1):  # pmap feeds a process's rows as one block
+            raise ValueError(
+                f"process {me}'s devices are not one block of the pmap's device list "
+                f"({[d.id for d in self.devices]}); pass devices grouped by process"
+            )
         self.distributed = len(self.local_rows) < self.num_devices
         # Host arrays with a leading device axis -> one shard per device, laid out exactly
         # as a pmap's outputs (same mesh axis name), so jit sees no new input sharding.
@@ -128,7 +133,7 @@ class Population:
             rng = rng[None]
         if rng.shape[0] != self.members:
             raise ValueError(f"{what} needs one key per member ({self.members}), got {rng.shape}")
-        # fold_in 0: what each host folded in its index before the rows were split.
+        # fold_in 0 keeps the keys single-process runs drew before processes shared rows.
         rng = jax.vmap(lambda k: jax.random.fold_in(k, 0))(rng)
         keys = jax.vmap(lambda k: jax.random.split(k, self.num_devices))(rng)
         return jnp.swapaxes(keys, 0, 1)[self.local_rows]
