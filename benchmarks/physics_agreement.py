@@ -13,12 +13,21 @@ percentile, max) of the largest joint-angle difference, split by whether the nat
 had an agent-target contact, and the implementation's speed on that batch (control
 periods per second, after its compile). ``--impls warp`` needs ``warp-lang`` (``pip
 install -e ".[warp]"``); MuJoCo Warp then runs on the CPU device when no GPU is there.
+
+``--settings`` replays MJX's JAX implementation under other scene settings too (each
+with native episodes of the same scene, since solver iterations change native MuJoCo as
+well): which setting causes how much of the disagreement in contact, and at what cost.
+``JAX_ENABLE_X64=1`` runs MJX in float64 (precision against the rest).
+
+    python -m benchmarks.physics_agreement --impls jax --settings scene iterations16 \
+        iterations64 caps48 --out benchmarks/physics_agreement/handshake_settings.json
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import sys
 import time
@@ -34,6 +43,19 @@ from benchmarks import contact_rules, machine
 from mjx_hands import env as env_lib
 from mjx_hands import physics, scene
 from mjx_hands.env_config import EnvConfig
+
+SETTINGS = {
+    "scene": {},
+    "iterations16": {"solver_iterations": 16},
+    "iterations64": {"solver_iterations": 64},
+    "caps48": {"max_geom_pairs": 48, "max_contact_points": 64},
+    "iterations64_caps48": {
+        "solver_iterations": 64,
+        "max_geom_pairs": 48,
+        "max_contact_points": 64,
+    },
+}
+"""Scene settings (``SceneConfig`` fields over the scene's own) of ``--settings``."""
 
 
 def native_transitions(env, episodes: int, close: float, seed: int) -> dict[str, np.ndarray]:
@@ -78,11 +100,13 @@ def mjx_periods(
     template = mjx.put_data(model, mujoco.MjData(model), impl=impl, **sizes)
 
     def period(qpos, qvel, time, ctrl, mocap_pos, mocap_quat):
-        d = template.replace(
-            qpos=qpos, qvel=qvel, time=time, ctrl=ctrl, mocap_pos=mocap_pos, mocap_quat=mocap_quat
-        )
+        given = {"qpos": qpos, "qvel": qvel, "time": time, "ctrl": ctrl}
+        given |= {"mocap_pos": mocap_pos, "mocap_quat": mocap_quat}
+        # In the template's precision (float64 under JAX_ENABLE_X64=1).
+        d = template.replace(**{k: v.astype(getattr(template, k).dtype) for k, v in given.items()})
         with jax.default_matmul_precision("highest"):
-            d = jax.lax.fori_loop(0, n_substeps, lambda _, d: mjx.step(m, d), d)
+            d = mjx.step(m, d)  # first step outside: under x64 it settles the carry's dtypes
+            d = jax.lax.fori_loop(1, n_substeps, lambda _, d: mjx.step(m, d), d)
         return d.qpos
 
     run = jax.jit(jax.vmap(period))
@@ -113,28 +137,57 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument(
         "--warp-contacts", type=int, default=4096, help="Warp's naconmax (256 overflowed)"
     )
+    parser.add_argument(
+        "--settings",
+        nargs="+",
+        default=["scene"],
+        choices=list(SETTINGS),
+        help="scene settings to replay MJX's JAX implementation under (Warp: the scene's)",
+    )
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
 
-    env = env_lib.HandInteractionEnv(
-        EnvConfig(task=args.task, mocap_source=args.mocap_source, physics="native")
-    )
-    print(f"native: {args.episodes} follower episodes of {args.task} ...", flush=True)
-    t = native_transitions(env, args.episodes, args.close, args.seed)
-    model = physics.native_model(env.mj_model, env.config.contact_distance)
     record = {
         "machine": machine.describe(),
+        "versions": machine.versions(),
         "task": args.task,
         "episodes": args.episodes,
         "close": args.close,
         "seed": args.seed,
+        "warp_contacts": args.warp_contacts,
+    }
+    for name in args.settings:
+        impls = [i for i in args.impls if name == "scene" or i == "jax"]
+        result = agreement(args, SETTINGS[name], impls)
+        if name == "scene":
+            record |= result  # the layout of records before --settings
+        else:
+            record.setdefault("settings", {})[name] = result | {"scene": SETTINGS[name]}
+        if args.out is not None:
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+            args.out.write_text(json.dumps(record, indent=2))
+    return record
+
+
+def agreement(args, overrides: dict, impls: list[str]) -> dict:
+    """Native follower episodes of the scene with ``overrides``, replayed period by period
+    on each MJX implementation of ``impls``."""
+    scene_config = dataclasses.replace(scene.SceneConfig(), **overrides)
+    env = env_lib.HandInteractionEnv(
+        EnvConfig(
+            task=args.task, mocap_source=args.mocap_source, physics="native", scene=scene_config
+        )
+    )
+    print(f"native {overrides or 'scene'}: {args.episodes} follower episodes ...", flush=True)
+    t = native_transitions(env, args.episodes, args.close, args.seed)
+    model = physics.native_model(env.mj_model, env.config.contact_distance)
+    record = {
         "transitions": len(t["qpos"]),
         "in_contact": int(t["contact"].sum()),
         "substeps": env.n_substeps,
-        "warp_contacts": args.warp_contacts,
         "impls": {},
     }
-    for impl in args.impls:
+    for impl in impls:
         print(f"MJX {impl}: {len(t['qpos'])} control periods ...", flush=True)
         try:
             qpos, rate = mjx_periods(model, impl, env.n_substeps, t, args.warp_contacts)
@@ -155,9 +208,6 @@ def main(argv: list[str] | None = None) -> dict:
             f"{c['p90']:.1e}, max {c['max']:.1e} rad; {rate:,.0f} periods/s",
             flush=True,
         )
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(record, indent=2))
     return record
 
 
