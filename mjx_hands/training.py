@@ -380,8 +380,10 @@ def _resume(algo, state, runs: list[RunDirectory], out) -> tuple[Any, int]:
     for r in runs:  # ... whose newer checkpoints the resumed run will write again
         checkpoint.discard_after(r.checkpoints, start_epoch)
         checkpoint.discard_after(r.best_dir, start_epoch)
+    # Shapes only: a concrete state would be laid out (across processes: copied) to say them.
+    like = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), state)
     trees = [
-        r.restore(algo, state, i, start_epoch, verified=s == start_epoch)
+        r.restore(algo, like, i, start_epoch, verified=s == start_epoch)
         for i, (r, s) in enumerate(zip(runs, saved, strict=True))
     ]
     print(f"resumed from epoch {start_epoch}", file=out, flush=True)
