@@ -55,7 +55,18 @@ import numpy as np
 from brax.envs.base import Env, State, Wrapper
 from flax import struct
 
-from mjx_hands import ik, mocap, physics, profiles, reward_params, rewards, scene, spatial, tasks
+from mjx_hands import (
+    ik,
+    mocap,
+    partner,
+    physics,
+    profiles,
+    reward_params,
+    rewards,
+    scene,
+    spatial,
+    tasks,
+)
 from mjx_hands import shadow_hand as sh
 from mjx_hands.contract import InteractionEnv
 from mjx_hands.env_config import DEMO_SETS, EnvConfig, moving, reward_weights
@@ -199,6 +210,12 @@ class EpisodeInfo:
     target_velocity: jax.Array | None = None
     # (delay, 24) actions not yet applied, oldest first (``EnvConfig.action_delay``).
     action_queue: jax.Array | None = None
+    # The recorded partner (``EnvConfig.partner``): its palm pose at the closest
+    # approach as placed (3,), (3, 3), (4,), and the row of the partner tables at step 0.
+    partner_base_pos: jax.Array | None = None
+    partner_base_rot: jax.Array | None = None
+    partner_base_quat: jax.Array | None = None
+    partner_row: jax.Array | None = None
 
 
 class HandInteractionEnv(Env):
@@ -271,8 +288,17 @@ class HandInteractionEnv(Env):
         )
 
     def _init_target_tables(self) -> None:
-        """Target-hand poses in the palm frame for every demo and control step."""
-        joints = np.asarray(self.params.ref_target_joints)  # (n_demos, L, 20)
+        """Target-hand poses in the palm frame for every demo and control step of its
+        window (past its end: its last frame), and the recorded partner's palm path."""
+        tables = partner.partner_tables(
+            self.demos,
+            np.asarray(self.params.t_min_frame),
+            self.config.control_dt,
+            self.config.partner_share,
+        )
+        # float32 angles, as the reward's references hold them: a static target's
+        # poses are those of Algorithm 1's reference rows.
+        joints = tables.joints.astype(np.float32)  # (n_demos, L, 20)
         n, length = joints.shape[:2]
         poses = scene.target_poses(joints.reshape(n * length, 20))
         reshape = lambda x: jnp.asarray(x.reshape((n, length) + x.shape[1:]), jnp.float32)
@@ -280,6 +306,10 @@ class HandInteractionEnv(Env):
         self.link_quat = reshape(poses.link_quat)
         self.point_pos = reshape(poses.point_pos)
         self.point_rot = reshape(poses.point_rot)
+        self.partner_pos = jnp.asarray(tables.palm_pos, jnp.float32)
+        self.partner_rot = jnp.asarray(tables.palm_rot, jnp.float32)
+        quats = [_rot_to_quat(r) for r in tables.palm_rot.reshape(-1, 3, 3)]
+        self.partner_quat = jnp.asarray(np.reshape(quats, (n, length, 4)), jnp.float32)
         center, rot = place_target(self.params, self.config.task, self.config.contact_point)
         self.target_center = jnp.asarray(center, jnp.float32)
         self.target_rot = jnp.asarray(rot, jnp.float32)
@@ -360,14 +390,22 @@ class HandInteractionEnv(Env):
             )
         target_quat = spatial.quat_mul(tilt, self.target_quat)
         target_rot = spatial.quat_to_mat(tilt) @ self.target_rot
-        to_world = lambda x: target_pos + x @ target_rot.T
-        link_pos = to_world(self.link_pos[demo, frame])
-        link_quat = spatial.quat_mul(target_quat, self.link_quat[demo, frame])
-        target_points = to_world(self.point_pos[demo, frame])
-        target_frames = target_rot @ self.point_rot[demo, frame]
-        goal_points = rewards.goal_positions(
-            target_points, target_frames, p.j_min[demo], p.goal_offsets[demo]
-        )
+        base = (target_pos, target_rot, target_quat)
+        recorded = self.config.partner == "recorded"
+        if recorded:
+            low, high = self.config.partner_lag
+            lag = jax.random.randint(jax.random.fold_in(k_motion, 3), (), low, high + 1)
+
+        def target_at(step: jax.Array) -> tuple:
+            """The target hand while the agent starts at demonstration step ``step``:
+            its palm (position, rotation, quaternion), its partner-table row and
+            :meth:`_target_at`'s arrays. Static: the drawn frame, wherever the agent
+            starts; recorded: the partner's own time, ``step`` + the episode's lag."""
+            if not recorded:
+                return base, frame, self._target_at(demo, frame, *base)
+            row = jnp.clip(step + lag, 0, self.partner_pos.shape[1] - 1)
+            pose = self._partner_pose(demo, row, base)
+            return pose, row, self._target_at(demo, row, *pose)
 
         def start_pose(
             step: jax.Array, backoff: jax.Array
@@ -375,19 +413,25 @@ class HandInteractionEnv(Env):
             """The actor's demonstrated palm pose and finger angles at ``step``, with the
             episode's (fixed) start noise, the palm moved ``backoff`` metres farther
             from the target palm along the line between the two."""
-            palm_goal = to_world(p.ref_palm_pos[demo, step]) + position_noise
-            away = palm_goal - target_points[0]
+            (palm_pos, palm_rot_world, _), _, (_, _, points, _, _) = target_at(step)
+            palm_goal = palm_pos + p.ref_palm_pos[demo, step] @ palm_rot_world.T + position_noise
+            away = palm_goal - points[0]
             palm_goal = palm_goal + backoff * away / jnp.maximum(jnp.linalg.norm(away), 1e-6)
-            palm_rot = target_rot @ p.ref_palm_rot[demo, step]
+            palm_rot = palm_rot_world @ p.ref_palm_rot[demo, step]
             return palm_goal, palm_rot, p.ref_angles[demo, step] + joint_noise
+
+        def mocap_at(step: jax.Array) -> tuple[jax.Array, jax.Array]:
+            _, _, (link_pos, link_quat, *_) = target_at(step)
+            return (
+                jnp.asarray(self.mocap_pos0, jnp.float32).at[self.target_mocap].set(link_pos),
+                jnp.asarray(self.mocap_quat0, jnp.float32).at[self.target_mocap].set(link_quat),
+            )
 
         position_noise = self.config.start_position_noise * jax.random.normal(k_pos, (3,))
         joint_noise = self.config.start_joint_noise * jax.random.normal(k_joint, (20,))
-        mocap = (
-            jnp.asarray(self.mocap_pos0, jnp.float32).at[self.target_mocap].set(link_pos),
-            jnp.asarray(self.mocap_quat0, jnp.float32).at[self.target_mocap].set(link_quat),
-        )
-        start, data = self._separated_start(mocap, start, start_pose)
+        start, data = self._separated_start(mocap_at, start, start_pose)
+        (target_pos, target_rot, _), row, arrays = target_at(start)
+        _, _, target_points, target_frames, goal_points = arrays
 
         episode = EpisodeInfo(
             rng=rng,
@@ -410,6 +454,13 @@ class HandInteractionEnv(Env):
                 speed = self.config.target_speed
             episode = episode.replace(
                 target_velocity=jnp.asarray(speed, jnp.float32) * random_direction(k_motion)
+            )
+        if self.config.partner == "recorded":
+            episode = episode.replace(
+                partner_base_pos=base[0],
+                partner_base_rot=base[1],
+                partner_base_quat=base[2],
+                partner_row=row,
             )
         if self.config.action_delay > 0:
             hold = self.action_for(data.ctrl)  # the set-points of the start pose
@@ -451,7 +502,7 @@ class HandInteractionEnv(Env):
 
     def _separated_start(
         self,
-        mocap: tuple[jax.Array, jax.Array],
+        mocap_at: Callable[[jax.Array], tuple[jax.Array, jax.Array]],
         start: jax.Array,
         start_pose: Callable[[jax.Array, jax.Array], tuple[jax.Array, jax.Array, jax.Array]],
     ) -> tuple[jax.Array, Any]:
@@ -493,7 +544,7 @@ class HandInteractionEnv(Env):
             earlier = jnp.maximum(step - cfg.start_backoff_steps, 1)
             step = jnp.where(retreat & ~at_first, earlier, step)
             qpos = self._start_qpos(*start_pose(step, backoff))
-            state = self.physics.pose(qpos, *mocap)
+            state = self.physics.pose(qpos, *mocap_at(step))
             return step, backoff, state, self.physics.readings(state).penetration, tries + 1
 
         def penetrating(carry):
@@ -504,7 +555,7 @@ class HandInteractionEnv(Env):
 
         # One traced forward pass serves the drawn start and every retreat.
         zero = jnp.zeros(())
-        shapes = jax.eval_shape(self.physics.pose, jnp.zeros(self.mj_model.nq), *mocap)
+        shapes = jax.eval_shape(self.physics.pose, jnp.zeros(self.mj_model.nq), *mocap_at(start))
         rest = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)  # carry type only
         first = (start, zero, rest, jnp.full((), jnp.inf), jnp.zeros((), jnp.int32))
         step, _, state, _, _ = jax.lax.while_loop(penetrating, attempt, first)
@@ -523,9 +574,7 @@ class HandInteractionEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)
-        data, episode = state.pipeline_state, state.info["episode"]
-        if episode.target_velocity is not None:
-            data, episode = self._move_target(data, episode)
+        data, episode = self._advance_partner(state.pipeline_state, state.info["episode"])
         applied = action
         if episode.action_queue is not None:  # the oldest waiting action, then queue this one
             queue = episode.action_queue
@@ -601,21 +650,93 @@ class HandInteractionEnv(Env):
             jax.random.fold_in(jax.random.fold_in(episode.rng, 2), episode.step)
         )
         velocity = jnp.where(turns, fresh, velocity)
+        # The recorded partner's path is relative to its placed pose: that pose moves.
+        anchor = (
+            episode.target_pos if episode.partner_base_pos is None else episode.partner_base_pos
+        )
         position, velocity = reflect_into_box(
-            episode.target_pos + velocity * cfg.control_dt,
+            anchor + velocity * cfg.control_dt,
             velocity,
             self.target_center,
             jnp.asarray(cfg.target_motion_box, jnp.float32),
         )
-        shift = position - episode.target_pos
+        shift = position - anchor
         mocap_pos = data.mocap_pos.at[self.target_mocap].add(shift)
         episode = episode.replace(
-            target_pos=position,
+            target_pos=episode.target_pos + shift,
             target_points=episode.target_points + shift,
             goal_points=episode.goal_points + shift,
             target_velocity=velocity,
         )
+        if episode.partner_base_pos is not None:
+            episode = episode.replace(partner_base_pos=position)
         return data.replace(mocap_pos=mocap_pos), episode
+
+    def _advance_partner(self, data, episode: EpisodeInfo) -> tuple[Any, EpisodeInfo]:
+        """The target hand one control period on, before the physics step of the period:
+        moved (``target_speed``), then at its recorded pose of the period's end
+        (``partner = 'recorded'``); unchanged for the paper's static target."""
+        if episode.target_velocity is not None:
+            data, episode = self._move_target(data, episode)
+        if episode.partner_row is None:
+            return data, episode
+        row = jnp.clip(episode.partner_row + episode.step + 1, 0, self.partner_pos.shape[1] - 1)
+        base = (episode.partner_base_pos, episode.partner_base_rot, episode.partner_base_quat)
+        pos, rot, quat = self._partner_pose(episode.demo, row, base)
+        link_pos, link_quat, points, frames, goals = self._target_at(
+            episode.demo, row, pos, rot, quat
+        )
+        data = data.replace(
+            mocap_pos=data.mocap_pos.at[self.target_mocap].set(link_pos),
+            mocap_quat=data.mocap_quat.at[self.target_mocap].set(link_quat),
+        )
+        episode = episode.replace(
+            target_pos=pos,
+            target_rot=rot,
+            target_points=points,
+            target_frames=frames,
+            goal_points=goals,
+        )
+        return data, episode
+
+    def _partner_pose(
+        self, demo: jax.Array, row: jax.Array, base: tuple[jax.Array, jax.Array, jax.Array]
+    ) -> tuple[jax.Array, jax.Array, jax.Array]:
+        """The recorded partner's palm at partner-table ``row`` of ``demo``, its pose at
+        the closest approach being ``base`` (position (3,), rotation (3, 3), quaternion
+        (4,), world): the same three of the palm at that row."""
+        base_pos, base_rot, base_quat = base
+        return (
+            base_pos + base_rot @ self.partner_pos[demo, row],
+            base_rot @ self.partner_rot[demo, row],
+            spatial.quat_mul(base_quat, self.partner_quat[demo, row]),
+        )
+
+    def _target_at(
+        self,
+        demo: jax.Array,
+        row: jax.Array,
+        pos: jax.Array,
+        rot: jax.Array,
+        quat: jax.Array,
+    ) -> tuple[jax.Array, ...]:
+        """The target hand of ``demo`` in its posture of table ``row`` with its palm at
+        ``pos`` (3,), ``rot`` (3, 3) / ``quat`` (4,): mocap link positions (21, 3) and
+        quaternions (21, 4), palm centre + fingertips (6, 3), their frames (6, 3, 3) and
+        the reward's goal points (6, 3), all world."""
+        to_world = lambda x: pos + x @ rot.T
+        points = to_world(self.point_pos[demo, row])
+        frames = rot @ self.point_rot[demo, row]
+        goals = rewards.goal_positions(
+            points, frames, self.params.j_min[demo], self.params.goal_offsets[demo]
+        )
+        return (
+            to_world(self.link_pos[demo, row]),
+            spatial.quat_mul(quat, self.link_quat[demo, row]),
+            points,
+            frames,
+            goals,
+        )
 
     def partner_schedule(self, state: State) -> dict[str, jax.Array]:
         """Where the partner's hand is, and what the policy observes of it, at every
@@ -625,8 +746,8 @@ class HandInteractionEnv(Env):
         the physics and build the observation from these and its own readings
         (:mod:`mjx_hands.export`). Arrays with a leading axis T + 1:
 
-        * ``mocap_pos`` (T+1, nmocap, 3): the target's mocap bodies in the physics step
-          that ends at step k (k = 0: at reset);
+        * ``mocap_pos`` (T+1, nmocap, 3), ``mocap_quat`` (T+1, nmocap, 4): the target's
+          mocap bodies in the physics step that ends at step k (k = 0: at reset);
         * as observed, sensing error included: ``target_pos`` (T+1, 3), ``target_points``,
           ``goal_points``, ``imitation_points`` (T+1, 6, 3), ``target_links`` (T+1, 21, 3);
         * ``imitation_active`` (T+1,) 0/1, the phase's flag.
@@ -642,6 +763,7 @@ class HandInteractionEnv(Env):
             links = data.mocap_pos[self.target_mocap[self.observed_links]]
             return {
                 "mocap_pos": data.mocap_pos,
+                "mocap_quat": data.mocap_quat,
                 "target_pos": episode.target_pos + error,
                 "target_points": episode.target_points + error,
                 "goal_points": episode.goal_points + error,
@@ -651,9 +773,7 @@ class HandInteractionEnv(Env):
             }
 
         def advance(carry, _):
-            data, episode = carry
-            if episode.target_velocity is not None:
-                data, episode = self._move_target(data, episode)
+            data, episode = self._advance_partner(*carry)
             episode = episode.replace(step=episode.step + 1)
             return (data, episode), at(data, episode)
 

@@ -16,6 +16,7 @@ from typing import Literal
 import numpy as np
 
 from mjx_hands import profiles, reward_params, scene, tasks
+from mjx_hands.partner import DEFAULT_SHARE
 
 Task = Literal[tasks.TASKS]  # the registry's names, as choices of --task
 DEMO_SETS = ("authors", "all")
@@ -24,6 +25,9 @@ MOCAP_SOURCES = ("auto", "optitrack", "synthetic")
 PHYSICS = ("auto", "mjx", "native", "warp")
 """``EnvConfig.physics``: MJX, native C MuJoCo, MuJoCo Warp, or auto (native on CPUs, MJX
 elsewhere); ``mjx_hands.physics``."""
+PARTNERS = ("static", "recorded")
+"""``EnvConfig.partner``: a target hand that holds one pose, or one that replays its
+demonstration (``mjx_hands.partner``)."""
 
 
 def reward_weights(config: EnvConfig) -> reward_params.RewardWeights:
@@ -113,6 +117,21 @@ class EnvConfig:
     actuators receiving it (a robot controller's latency); the first steps of an episode
     apply the action that holds the start pose. The reward's action term charges the
     policy's own action. 0: none."""
+    partner: Literal[PARTNERS] = "static"
+    """Partner model "recorded partner": 'static' (the paper's: the target hand holds one
+    pose of its demonstration, drawn per episode between the agent's start and the
+    closest approach) or 'recorded' (it replays the demonstration's own approach: its
+    palm travels and turns along its recorded path, which ends at the placed pose at the
+    closest approach, and its fingers move through their recorded angles, closing at
+    contact; then it holds the window's last frame). Goals and imitation references
+    follow it. See ``mjx_hands.partner``."""
+    partner_share: float = DEFAULT_SHARE
+    """The recorded partner's share of the palms' closing where the recordings hold only
+    the palm-to-palm vector (the authors' release; imported takes record the path)."""
+    partner_lag: tuple[int, int] = (-5, 5)
+    """[low, high] control steps, drawn uniformly per episode: how far the recorded
+    partner runs ahead of (> 0) or behind (< 0) the demonstration's time at the agent's
+    start, so that its arrival is not tied to the agent's start."""
     target_turn_period: float = 0.5
     """Seconds between the moving target's changes of direction."""
     target_motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
@@ -152,6 +171,32 @@ class EnvConfig:
             raise ValueError("EnvConfig: " + "; ".join(problems))
 
 
+PARTNER_SETUPS = ("static", "robust")
+"""Named sets of partner models to train with (``--partners``): the paper's static target,
+or :data:`ROBUST_PARTNERS`."""
+ROBUST_PARTNERS = {
+    "partner": "recorded",
+    # A margin past the +-30 deg yaw x pitch the robust policy is held to; roll +-10 deg.
+    "target_orientation_range": (0.61, 0.61, 0.17),
+    # Still to past the 0.2 m/s it is held to, uniformly per episode.
+    "target_speed_range": (0.0, 0.25),
+    # Motion capture / vision error of the partner's hand position.
+    "target_position_noise": 0.002,
+}
+"""The robust setup's partner models: a recorded partner that arrives as the human did,
+turned per episode, carried along at a random speed, observed with 2 mm noise."""
+
+
+def with_partners(config: EnvConfig, setup: str) -> EnvConfig:
+    """``config`` with the partner models of ``setup`` (``PARTNER_SETUPS``): 'static'
+    leaves it as it is, 'robust' sets :data:`ROBUST_PARTNERS`."""
+    if setup not in PARTNER_SETUPS:
+        raise ValueError(f"unknown partners {setup!r}; expected one of {', '.join(PARTNER_SETUPS)}")
+    if setup == "static":
+        return config
+    return dataclasses.replace(config, **ROBUST_PARTNERS)
+
+
 def moving(config: EnvConfig) -> bool:
     """Whether ``config``'s target hand moves (``target_speed`` or ``target_speed_range``)."""
     return config.target_speed is not None or config.target_speed_range is not None
@@ -170,6 +215,7 @@ def config_problems(config: EnvConfig) -> list[str]:
             ("mocap_source", MOCAP_SOURCES),
             ("demos", DEMO_SETS),
             ("physics", PHYSICS),
+            ("partner", PARTNERS),
         )
         if getattr(config, name) not in choices
     ]
@@ -189,6 +235,11 @@ def config_problems(config: EnvConfig) -> list[str]:
             )
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
+    if not (np.isfinite(config.partner_share) and 0 <= config.partner_share <= 1):
+        problems.append(f"partner_share {config.partner_share} must be in [0, 1]")
+    lag = config.partner_lag
+    if not (len(lag) == 2 and all(isinstance(v, int) for v in lag) and lag[0] <= lag[1]):
+        problems.append(f"partner_lag {lag} must be [low, high] whole control steps, low <= high")
     for name in ("target_rotation_noise", "target_position_noise"):
         value = getattr(config, name)
         if not (np.isfinite(value) and value >= 0):

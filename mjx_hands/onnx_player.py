@@ -63,17 +63,17 @@ class Player:
         return len(self.episodes["qpos"])
 
     # ------------------------------------------------------------------ physics
-    def _run(self, state: dict, ctrl: np.ndarray, mocap_pos: np.ndarray, nstep: int):
+    def _run(self, state: dict, ctrl: np.ndarray, mocap: tuple, nstep: int):
         """``nstep`` physics steps from ``state`` (float32 time, qpos, qvel, as the
-        training program keeps it between control periods), the solver started cold;
-        returns (time, qpos, qvel, sensordata) in float32."""
+        training program keeps it between control periods) with the partner's mocap
+        bodies at ``mocap`` (positions (nmocap, 3), quaternions (nmocap, 4)), the solver
+        started cold; returns (time, qpos, qvel, sensordata) in float32."""
         m, d = self.model, self.data
         d.time = float(state["time"])
         d.qpos[:] = state["qpos"]
         d.qvel[:] = state["qvel"]
         d.ctrl[:] = ctrl
-        d.mocap_pos[:] = mocap_pos
-        d.mocap_quat[:] = state["mocap_quat"]
+        d.mocap_pos[:], d.mocap_quat[:] = mocap
         d.qacc_warmstart[:] = 0.0
         for _ in range(nstep):
             mujoco.mj_step(m, d)
@@ -122,8 +122,13 @@ class Player:
         partner = {k[len("partner/") :]: v for k, v in e.items() if k.startswith("partner/")}
         state = {k: e[k] for k in ("time", "qpos", "qvel", "mocap_quat")}
         length, substeps = self.env["episode_length"], self.env["substeps"]
+        # Exports before the recorded partner kept one orientation for the whole episode.
+        turns = partner.get(
+            "mocap_quat", np.broadcast_to(e["mocap_quat"], (length + 1,) + e["mocap_quat"].shape)
+        )
+        mocap = lambda k: (partner["mocap_pos"][k], turns[k])
         # The start's readings: the sensors of one step from the pose (its motion dropped).
-        *_, sensordata = self._run(state, e["ctrl"], partner["mocap_pos"][0], 1)
+        *_, sensordata = self._run(state, e["ctrl"], mocap(0), 1)
         readings = self._readings(sensordata)
         obs = self.observation(0, e["qpos"], e["qvel"], readings, partner)
         queue = list(e["action_queue"])  # actions not yet applied (action delay)
@@ -135,7 +140,7 @@ class Player:
                 applied = queue.pop(0)
                 queue.append(action)
             ctrl = self.ctrl_lo + F32(0.5) * (applied + F32(1.0)) * (self.ctrl_hi - self.ctrl_lo)
-            time, qpos, qvel, sensordata = self._run(state, ctrl, partner["mocap_pos"][k], substeps)
+            time, qpos, qvel, sensordata = self._run(state, ctrl, mocap(k), substeps)
             if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
                 return {"success": False, "diverged": True, "steps": k}
             state = state | {"time": time, "qpos": qpos, "qvel": qvel}
@@ -202,7 +207,9 @@ def main(argv: list[str] | None = None) -> int:
     if reference is not None:
         same = int(np.sum(np.asarray(success) == reference[:n].astype(bool)))
         summary |= {"jax_success_final": float(np.mean(reference[:n])), "same_outcome": same}
-        line += f"; the training program's: {summary['jax_success_final']:.3f}, same outcome in {same}"
+        line += (
+            f"; the training program's: {summary['jax_success_final']:.3f}, same outcome in {same}"
+        )
     print(line)
     if args.video is not None:
         render_video(player, 0, args.video, args.camera)

@@ -402,7 +402,7 @@ def imitation_length(demo: Demonstration, dt: float = CONTROL_DT) -> int:
     return step_of_frame(closest_approach(demo)[0], frames_per_step(demo, dt)) + 1
 
 
-def _resample(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
+def resample(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
     """Linear interpolation of ``x`` (T, ...) at fractional ``frames`` (K,) -> (K, ...)."""
     lo = np.floor(frames).astype(int)
     hi = np.minimum(lo + 1, len(x) - 1)
@@ -410,7 +410,7 @@ def _resample(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
     return (1 - s) * x[lo] + s * x[hi]
 
 
-def _nearest_rotation(m: np.ndarray) -> np.ndarray:
+def nearest_rotation(m: np.ndarray) -> np.ndarray:
     """Project (..., 3, 3) matrices onto SO(3): interpolated rotations are not rotations."""
     u, _, vt = np.linalg.svd(m)
     d = np.sign(np.linalg.det(u @ vt))
@@ -484,13 +484,13 @@ def algorithm1(
         contact_end_step=i32(step_of_frame(demo.contact_end, r)),
         goal_offsets=f32(offsets[t_min]),
         goal_angles=f32(demo.actor_joints[t_min]),
-        ref_offsets=f32(_resample(offsets, frames)),
-        ref_angles=f32(_resample(np.asarray(demo.actor_joints, np.float64), frames)),
-        ref_palm_pos=f32(_resample(np.asarray(demo.actor_points, np.float64)[:, 0], frames)),
+        ref_offsets=f32(resample(offsets, frames)),
+        ref_angles=f32(resample(np.asarray(demo.actor_joints, np.float64), frames)),
+        ref_palm_pos=f32(resample(np.asarray(demo.actor_points, np.float64)[:, 0], frames)),
         ref_palm_rot=f32(
-            _nearest_rotation(_resample(np.asarray(demo.actor_palm_rot, np.float64), frames))
+            nearest_rotation(resample(np.asarray(demo.actor_palm_rot, np.float64), frames))
         ),
-        ref_target_joints=f32(_resample(np.asarray(demo.target_joints, np.float64), frames)),
+        ref_target_joints=f32(resample(np.asarray(demo.target_joints, np.float64), frames)),
         w_position=f32(w_position),
         w_angle=f32(np.full(N_JOINTS, weights.K_alpha)),
         w_contact=f32(w_contact),

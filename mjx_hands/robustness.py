@@ -19,7 +19,10 @@ The paper's two tests (its Figs. 5 and 6), for one run or for several runs of on
 * **sensing** (``--sweep sensing`` or ``all``): the observed target position off by a
   Gaussian error of each ``--noise-mm`` (``EnvConfig.target_position_noise``), and the
   action reaching the actuators each of ``--delays`` control steps late
-  (``EnvConfig.action_delay``) -> ``robustness_sensing.json`` / ``.png``.
+  (``EnvConfig.action_delay``) -> ``robustness_sensing.json`` / ``.png``;
+* **partner** (``--sweep partner`` or ``all``): the static target against the recorded
+  partner, which replays its demonstration's approach (``EnvConfig.partner``), at each
+  of ``--partner-shares`` -> ``robustness_partner.json`` / ``.png``.
 
 Every cell (and speed) sees the same episodes: episode k of each uses the same key
 (demonstration, target position, start pose), so cells differ only in the target's
@@ -48,12 +51,14 @@ from mjx_hands import env as env_lib
 ORIENTATION_FILE = "robustness_orientation"
 MOTION_FILE = "robustness_motion"
 SENSING_FILE = "robustness_sensing"
+PARTNER_FILE = "robustness_partner"
 SWEEPS = {
     "both": ("orientation", "motion"),
     "orientation": ("orientation",),
     "motion": ("motion",),
     "sensing": ("sensing",),
-    "all": ("orientation", "motion", "sensing"),
+    "partner": ("partner",),
+    "all": ("orientation", "motion", "sensing", "partner"),
 }
 
 
@@ -65,7 +70,7 @@ class RobustnessArgs:
     """Folders written by train.py (or grid members), all of one task."""
     sweep: Literal[tuple(SWEEPS)] = "both"
     """Which tests to run: both (orientation and motion, the paper's), one of them,
-    sensing (noise and delay), or all."""
+    sensing (noise and delay), partner (static vs the recorded partner), or all."""
     out: str | None = None
     """Output folder; default the run's folder (required with several runs)."""
     max_angle_deg: float = 60.0
@@ -78,6 +83,9 @@ class RobustnessArgs:
     """Std of the observed target position's error, millimetres (sensing sweep)."""
     delays: tuple[int, ...] = (0, 1, 2)
     """Control steps between an action and the actuators (sensing sweep)."""
+    partner_shares: tuple[float, ...] = (0.5,)
+    """The recorded partner's shares of the palms' closing to test (partner sweep; where
+    the recordings hold no target path: ``EnvConfig.partner_share``)."""
     turn_period: float = 0.5
     """Seconds between the moving target's changes of direction."""
     motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
@@ -109,6 +117,9 @@ def check_args(args: RobustnessArgs) -> None:
         problems.append(f"--noise-mm {list(args.noise_mm)} must be one or more stds >= 0 (mm)")
     if not args.delays or not all(isinstance(d, int) and d >= 0 for d in args.delays):
         problems.append(f"--delays {list(args.delays)} must be one or more whole steps >= 0")
+    shares = args.partner_shares
+    if not shares or not all(math.isfinite(v) and 0 <= v <= 1 for v in shares):
+        problems.append(f"--partner-shares {list(shares)} must be one or more shares in [0, 1]")
     if not (math.isfinite(args.turn_period) and args.turn_period > 0):
         problems.append(f"--turn-period {args.turn_period} must be positive (seconds)")
     if not all(math.isfinite(b) and b > 0 for b in args.motion_box):
@@ -260,6 +271,39 @@ def sensing_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
+@functools.lru_cache(maxsize=8)
+def partner_env(env, partner: str, share: float):
+    """``env`` with the ``partner`` model at ``share``, one object per setting."""
+    if (partner, share) == (env.config.partner, env.config.partner_share):
+        return env
+    config = dataclasses.replace(env.config, partner=partner, partner_share=share)
+    return env_lib.HandInteractionEnv(config)
+
+
+def partner_conditions(env, args: RobustnessArgs) -> list[tuple[str, float]]:
+    """(partner, share) of every condition of the partner sweep: the static target,
+    then the recorded partner at each share."""
+    return [("static", env.config.partner_share)] + [("recorded", s) for s in args.partner_shares]
+
+
+def partner_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
+    """Success per partner condition (:func:`partner_conditions`) of one policy: arrays
+    (n_conditions,). Every condition runs the same episodes (demonstration, target
+    placement, start); the recorded partner's lag is drawn per episode."""
+    identity = np.array([[1.0, 0.0, 0.0, 0.0]])
+    conditions = partner_conditions(env, args)
+    print(
+        f"  partner: {len(conditions)} conditions x {args.episodes} episodes", file=log, flush=True
+    )
+    out: dict[str, list] = {}
+    for partner, share in conditions:
+        run = partner_env(env, partner, share)
+        result = run_episodes(run, policy, identity, None, args.episodes, args.seed, args.chunk)
+        for key, value in result.items():
+            out.setdefault(key, []).append(float(value.mean()))
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
 def combine(per_run: list[dict], episodes: int) -> dict:
     """Mean and standard error of each array: {key: list, key_se: list, key_per_run}. The
     error is over runs; for one run, the binomial error over its ``episodes``."""
@@ -366,6 +410,31 @@ def plot_sensing(summary: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def plot_partner(summary: dict, path: Path) -> None:
+    """Success against the partner model: bars with their standard errors."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = summary["conditions"]
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(1.6 * len(names) + 3, 4), constrained_layout=True)
+    for offset, key, name in (
+        (-0.2, "success_final", "at the end"),
+        (0.2, "success", "at some step"),
+    ):
+        ax.bar(x + offset, summary[key], 0.4, yerr=summary[f"{key}_se"], capsize=3, label=name)
+    ax.set_xticks(x, names)
+    ax.set_ylim(0, 1.02)
+    ax.set_ylabel("success rate")
+    ax.legend(loc="lower left")
+    ax.grid(alpha=0.3, axis="y")
+    ax.set_title(f"{summary['task']}: static target vs recorded partner ({summary['runs']} run(s))")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def load_runs(args: RobustnessArgs) -> list[tuple]:
     """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
     loaded = []
@@ -450,6 +519,21 @@ def main(argv: list[str] | None = None) -> int:
             f"{d} steps {v:.2f}" for d, v in zip(args.delays, summary["delay_success_final"])
         )
         print(f"sensing: success at the end {noise}; delay {delay}; {out / SENSING_FILE}.json/.png")
+    if "partner" in sweeps:
+        per_run = []
+        for run_dir, policy, single, _ in runs:
+            print(f"{run_dir}:", flush=True)
+            per_run.append(partner_sweep(single, policy, args))
+        names = [
+            "static" if p == "static" else f"recorded, share {v:g}"
+            for p, v in partner_conditions(runs[0][2], args)
+        ]
+        summary = common | {"conditions": names, "partner_lag": list(runs[0][2].config.partner_lag)}
+        summary = summary | combine(per_run, args.episodes)
+        (out / f"{PARTNER_FILE}.json").write_text(json.dumps(summary, indent=1))
+        plot_partner(summary, out / f"{PARTNER_FILE}.png")
+        shown = ", ".join(f"{n} {v:.2f}" for n, v in zip(names, summary["success_final"]))
+        print(f"partner: success at the end {shown}; {out / PARTNER_FILE}.json/.png")
     return 0
 
 

@@ -15,6 +15,7 @@ USAGE = """Train a hand-interaction policy: the project's single command.
     python train.py --task et --profile paper   # the authors' environment and DDPG
     python train.py --task handclap --algo ddpg-ln  # with LayerNorm (the evidence's pick)
     python train.py --task et --no-imitation    # an ablation
+    python train.py --task et --partners robust # against a recorded, turning, moving partner
     python train.py --run-dir runs/x --resume   # continue a run with its own config
     python train.py --run-dir runs/x --resume --epochs 400   # ... and a larger budget
 
@@ -64,6 +65,7 @@ def preset_default(argv: list[str]):
         option(argv, "--preset") or "auto",
         env=EnvConfig(task=task if task in tasks.TASKS else "handshake", profile=profile),
         algo=option(argv, "--algo") or train_config.RECOMMENDED_ALGO[profile],
+        partners=option(argv, "--partners") or "static",
     )
 
 

@@ -17,7 +17,7 @@ import tyro
 from mjx_hands import checkpoint, learners, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.brax_agents import PPOConfig, SACConfig
-from mjx_hands.env_config import EnvConfig, reward_weights
+from mjx_hands.env_config import PARTNER_SETUPS, EnvConfig, reward_weights, with_partners
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,6 +37,11 @@ class TrainConfig:
     the same environment), or a registered plug-in."""
     preset: Literal["auto", "cpu", "gpu"] = "auto"
     """Size of the run; auto picks by the device JAX finds."""
+    partners: Literal[PARTNER_SETUPS] = "static"
+    """The partner models to train against: 'static' (the paper's target hand) or
+    'robust' (``env_config.ROBUST_PARTNERS``: the recorded partner, turned up to 35 deg,
+    moving up to 0.25 m/s, observed with 2 mm noise). Partner flags given as well
+    (``--partner``, ``--target-speed-range`` ...) override the setup's."""
     num_envs: int = 64
     """Parallel environments (summed over devices)."""
     epochs: int = 100
@@ -183,7 +188,8 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
         )
     algo = overrides.get("algo", base.algo)
     base = dataclasses.replace(base, ddpg=learner_config(algo, base.ddpg))
-    return dataclasses.replace(base, **overrides)
+    config = dataclasses.replace(base, **overrides)
+    return dataclasses.replace(config, env=with_partners(config.env, config.partners))
 
 
 def learner_config(algo: str, ddpg: DDPGConfig) -> DDPGConfig:
@@ -380,6 +386,7 @@ RUN_LOOP_FIELDS = {
     "save_replay": True,
     "replay_ratio": None,  # already resolved into ddpg.updates_per_iteration
     "preset": "auto",  # its values are in the other fields
+    "partners": "static",  # so are these (the env's partner fields)
 }
 
 

@@ -149,7 +149,9 @@ def test_a_start_at_the_first_step_backs_away_along_the_palm_line(native_handsha
         return jnp.asarray(base - push * away) + backoff * jnp.asarray(away), palm_rot, fingers
 
     mocap_jnp = (data.mocap_pos, data.mocap_quat)
-    step, got = jax.jit(lambda m: single._separated_start(m, jnp.int32(1), start_pose))(mocap_jnp)
+    step, got = jax.jit(
+        lambda m: single._separated_start(lambda step: m, jnp.int32(1), start_pose)
+    )(mocap_jnp)
     assert int(step) == 1
     candidates = [
         native_depth(base + (k * cfg.start_backoff_distance - push) * away)
@@ -376,7 +378,9 @@ def test_the_reward_is_given_one_way():
     assert env_lib.reward_weights(two) == rp.RewardWeights(K_p=2.0, K_c=0.5, K_alpha=0.0, K_pI=0.0)
     assert rp.task_knobs("handclap") == rp.RewardKnobs(1.0, 0.1, 0.2, 0.0, 0.5, 0.5)
     # Names outside their vocabularies are refused where the config is made.
-    with pytest.raises(ValueError, match="unknown reward 'baseline3'; expected one of full, baseline1"):
+    with pytest.raises(
+        ValueError, match="unknown reward 'baseline3'; expected one of full, baseline1"
+    ):
         env_lib.EnvConfig(reward="baseline3")
     with pytest.raises(ValueError, match="unknown demos 'some'; expected one of authors, all"):
         env_lib.EnvConfig(demos="some")

@@ -181,3 +181,219 @@ def test_the_motion_partner_draws_each_episodes_speed_from_its_range():
     assert np.linalg.norm(np.asarray(given.target_velocity)) == pytest.approx(0.05, abs=1e-6)
     with pytest.raises(ValueError, match="must be \\[low, high\\] m/s"):
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_speed_range=(0.3, 0.1)))
+
+
+# ------------------------------------------------------------- the recorded partner
+def _turning_demo(path_recorded: bool, frames: int = 25, fps: float = 50.0):
+    """A handshake-like demonstration built from world poses: the target palm turns 30°
+    about its z axis and travels 10 cm while the actor's palm closes in; the whole scene
+    sits at an arbitrary world pose (which the demonstration must not keep)."""
+    from mjx_hands import mocap
+
+    t = np.linspace(0.0, 1.0, frames)
+    world = rot_x(0.4) @ rot_y(-0.7)  # where the capture put the pair
+    offset = np.array([1.0, -2.0, 0.5])
+    target_rot = np.stack([world @ rot_z(np.radians(30) * s) for s in t])
+    target_pos = offset + np.stack([0.1 * t, 0.02 * t, 0 * t], 1) @ world.T
+    actor_pos = offset + np.stack([0.5 - 0.35 * t, 0.03 + 0 * t, 0.01 * t], 1) @ world.T
+    actor_rot = np.broadcast_to(world @ rot_y(np.pi), (frames, 3, 3))
+    joints = np.linspace(0.0, 0.4, frames)[:, None] * np.ones(20)
+    demo = mocap.build_demonstration(
+        task="handshake",
+        name="handshake/test/00",
+        source="synthetic",
+        fps=fps,
+        actor_joints=joints,
+        target_joints=joints[::-1],
+        actor_palm_pos=np.einsum("tji,tj->ti", target_rot, actor_pos - target_pos),
+        actor_palm_rot=np.swapaxes(target_rot, 1, 2) @ actor_rot,
+        contact_begin=frames - 6,
+        contact_end=frames - 1,
+        target_palm_rot=target_rot,
+        target_palm_pos=target_pos if path_recorded else None,
+    )
+    return demo, (target_pos, target_rot, actor_pos)
+
+
+@pytest.mark.parametrize("path_recorded", [True, False])
+def test_the_approach_path_is_the_recorded_one_or_the_targets_share_of_the_closing(path_recorded):
+    from mjx_hands import partner
+
+    demo, (target_pos, target_rot, actor_pos) = _turning_demo(path_recorded)
+    first = target_rot[0]
+    pos, rot = partner.approach_path(demo, share=0.3)
+    # Rotations: the palm's own turning, in its frame at frame 0.
+    np.testing.assert_allclose(rot, first.T @ target_rot, atol=1e-12)
+    np.testing.assert_allclose(np.degrees(np.arctan2(rot[-1, 1, 0], rot[-1, 0, 0])), 30, atol=1e-9)
+    if path_recorded:
+        want = (target_pos - target_pos[0]) @ first
+    else:  # 30 % of each change of the palm-to-palm vector, in frame-0 axes
+        between = (actor_pos - target_pos) @ first
+        want = -0.3 * (between - between[0])
+    np.testing.assert_allclose(pos, want, atol=1e-12)
+    # The tables: every control step (2 frames at 50 Hz and 25 Hz control), relative to
+    # the pose at t_min, past the window's end its last frame.
+    t_min = 14
+    tables = partner.partner_tables([demo], [t_min], dt=0.04, share=0.3, length=15)
+    frames = np.minimum(2 * np.arange(15), demo.num_frames - 1)
+    at_min = rot[t_min]
+    np.testing.assert_allclose(tables.palm_pos[0], (pos[frames] - pos[t_min]) @ at_min, atol=1e-12)
+    np.testing.assert_allclose(tables.palm_rot[0], at_min.T @ rot[frames], atol=1e-9)
+    np.testing.assert_allclose(tables.joints[0], demo.target_joints[frames], atol=1e-12)
+    np.testing.assert_allclose(tables.palm_pos[0, 7], 0, atol=1e-12)  # step 7 = frame 14
+
+
+def test_the_target_motion_survives_the_npz_round_trip_and_schema_1_files_still_read(tmp_path):
+    from mjx_hands import mocap
+
+    for recorded in (True, False):
+        demo, _ = _turning_demo(recorded)
+        arrays = mocap.demos_to_arrays([demo])
+        assert ("target_palm_pos" in arrays) == recorded
+        (back,) = mocap.demos_from_arrays(arrays, "handshake", "synthetic")
+        np.testing.assert_allclose(back.target_palm_rot, demo.target_palm_rot, atol=2e-6)
+        if recorded:
+            np.testing.assert_allclose(back.target_palm_pos, demo.target_palm_pos, atol=1e-6)
+        else:
+            assert back.target_palm_pos is None
+    # A schema-1 file (before the target's motion was stored): a target that never turns.
+    old = {k: v for k, v in arrays.items() if not k.startswith("target_palm")}
+    (still,) = mocap.demos_from_arrays(
+        old | {"schema_version": np.int64(1)}, "handshake", "synthetic"
+    )
+    np.testing.assert_array_equal(still.target_palm_rot, np.broadcast_to(np.eye(3), (25, 3, 3)))
+    with pytest.raises(mocap.MocapError, match="'target_palm_quat' needs schema_version 2"):
+        mocap.demos_from_arrays(arrays | {"schema_version": np.int64(1)}, "handshake", "synthetic")
+    mixed = [_turning_demo(True)[0], _turning_demo(False)[0]]
+    with pytest.raises(mocap.MocapError, match="all record the target palm position or none"):
+        mocap.demos_to_arrays(mixed)
+
+
+@pytest.fixture(scope="module")
+def recorded_partner():
+    """The authors' handshakes, the recorded partner (native physics), 64 episodes reset
+    and stepped 30 control periods with zero actions: every step's target and schedule."""
+    from mjx_hands import mocap
+
+    if not mocap.REAL_DATA_PATH.is_dir():
+        pytest.skip("the authors' recordings are not beside the repository")
+    env = env_lib.make_env(
+        "handshake", mocap_source="optitrack", physics="native", partner="recorded"
+    )
+    steps = 30
+
+    def episode(key):
+        state = env.reset(key)
+
+        def step(state, _):
+            state = env.step(state, jnp.zeros(env.action_size))
+            ep, data = state.info["episode"], state.pipeline_state
+            return state, (
+                ep.target_pos,
+                ep.target_rot,
+                ep.target_points,
+                ep.target_frames,
+                ep.goal_points,
+                data.mocap_pos,
+                data.mocap_quat,
+            )
+
+        _, trace = jax.lax.scan(step, state, None, length=steps)
+        return state.info["episode"], trace, env.partner_schedule(state)
+
+    keys = jax.random.split(jax.random.PRNGKey(11), 64)
+    first, trace, schedule = jax.jit(jax.vmap(episode))(keys)
+    return env, steps, jax.tree.map(np.asarray, (first, trace, schedule))
+
+
+def test_the_recorded_partner_replays_the_demonstrations_wrist_path_turning_and_fingers(
+    recorded_partner,
+):
+    from mjx_hands import hand_kinematics, partner, reward_params
+
+    env, steps, (first, trace, _) = recorded_partner
+    pos, rot, points, frames, goals, _, _ = trace
+    length = env.partner_pos.shape[1]
+    dt = env.config.control_dt
+    checked = 0
+    for i in range(0, 64, 4):  # sampled episodes, every 5th step
+        demo = env.demos[int(first.demo[i])]
+        t_min = int(env.params.t_min_frame[int(first.demo[i])])
+        path_pos, path_rot = partner.approach_path(demo, env.config.partner_share)
+        for k in range(0, steps, 5):
+            row = min(int(first.partner_row[i]) + k + 1, length - 1)
+            f = min(row * demo.fps * dt, demo.num_frames - 1)
+            lo, s = int(np.floor(f)), f - np.floor(f)
+            hi = min(lo + 1, demo.num_frames - 1)
+
+            def lerp(x, lo=lo, hi=hi, s=s):
+                return (1 - s) * x[lo] + s * x[hi]
+
+            u, _, vt = np.linalg.svd(lerp(path_rot))
+            turned = u @ vt
+            at_min = path_rot[t_min].T
+            want_rot = first.partner_base_rot[i] @ at_min @ turned
+            want_pos = first.partner_base_pos[i] + first.partner_base_rot[i] @ at_min @ (
+                lerp(path_pos) - path_pos[t_min]
+            )
+            np.testing.assert_allclose(rot[i, k], want_rot, atol=2e-5)
+            np.testing.assert_allclose(pos[i, k], want_pos, atol=2e-5)
+            # The fingers: the recorded angles, by the project's NumPy forward kinematics.
+            hand = hand_kinematics.forward_kinematics(lerp(demo.target_joints))
+            np.testing.assert_allclose(points[i, k], want_pos + hand.points @ want_rot.T, atol=1e-4)
+            # The goals ride with the target: fixed in its closest body's frame.
+            j = int(env.params.j_min[int(first.demo[i])])
+            local = (goals[i, k] - points[i, k, j]) @ frames[i, k, j]
+            np.testing.assert_allclose(
+                local, env.params.goal_offsets[int(first.demo[i])], atol=1e-4
+            )
+            checked += 1
+    assert checked == 96
+    # It does move: palms travel centimetres and turn degrees over these 1.2 s.
+    travel = np.linalg.norm(pos[:, -1] - pos[:, 0], axis=-1)
+    assert np.median(travel) > 0.01
+    del reward_params
+
+
+def test_the_recorded_partners_timing_is_drawn_and_its_schedule_is_what_the_physics_saw(
+    recorded_partner,
+):
+    env, steps, (first, trace, schedule) = recorded_partner
+    lag = first.partner_row - first.start_step
+    low, high = env.config.partner_lag
+    clipped = first.partner_row == 0
+    assert np.all(((lag >= low) & (lag <= high)) | clipped)
+    assert len(set(lag[~clipped].tolist())) >= 8  # 11 values possible, 64 draws
+    late = first.start_step > high  # no lag can reach row 0 from there: no clipping bias
+    assert late.sum() >= 10 and abs(lag[late].mean()) < 3.5 * 3.2 / np.sqrt(late.sum())
+    # The player outside JAX gets the mocap bodies the physics had at every step.
+    *_, mocap_pos, mocap_quat = trace
+    np.testing.assert_array_equal(schedule["mocap_pos"][:, 1 : steps + 1], mocap_pos)
+    np.testing.assert_array_equal(schedule["mocap_quat"][:, 1 : steps + 1], mocap_quat)
+    with pytest.raises(ValueError, match="partner_share 1.5 must be in \\[0, 1\\]"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(partner_share=1.5))
+    with pytest.raises(ValueError, match="unknown partner 'mirror'"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(partner="mirror"))
+
+
+def test_the_robust_setup_is_named_recorded_and_its_flags_still_win(tmp_path):
+    import tyro
+
+    from mjx_hands import env_config, train_cli
+
+    robust = train_cli.preset_default(["--partners", "robust", "--task", "et", "--preset", "cpu"])
+    assert robust.partners == "robust" and robust.env.task == "et"
+    for name, value in env_config.ROBUST_PARTNERS.items():
+        assert getattr(robust.env, name) == value, name
+    static = train_cli.preset_default(["--task", "et", "--preset", "cpu"])
+    assert static.env == env_lib.EnvConfig(task="et") and static.partners == "static"
+    argv = ["--partners", "robust", "--target-speed-range", "0", "0.1", "--run-dir", str(tmp_path)]
+    parsed = tyro.cli(train_config.TrainConfig, default=robust, args=argv)
+    assert parsed.env.target_speed_range == (0.0, 0.1)  # the flag over the setup
+    assert parsed.env.partner == "recorded"
+    back = train_config.config_from_json(
+        json.loads(json.dumps(train_config.config_to_json(parsed)))
+    )
+    assert back == train_config.resolved(parsed)
+    with pytest.raises(ValueError, match="unknown partners 'wild'"):
+        env_config.with_partners(env_lib.EnvConfig(), "wild")

@@ -497,6 +497,15 @@ def test_robustness_sweeps_a_trained_policy_over_orientations_and_speeds(hand_ru
         assert imperfect[f"noise_{key}"][0] == imperfect[f"delay_{key}"][0] == moving[key][0]
     assert (tmp_path / "robustness_sensing.png").stat().st_size > 5000
     assert robustness.main([*sensing, "--delays", "-1"]) == 2
+    # The recorded partner beside the static target: the static condition is the nominal.
+    partner = [str(run_dir), "--sweep", "partner", "--out", str(tmp_path), "--episodes", "2"]
+    assert robustness.main([*partner, "--partner-shares", "0", "1"]) == 0
+    replayed = json.loads((tmp_path / "robustness_partner.json").read_text())
+    assert replayed["conditions"] == ["static", "recorded, share 0", "recorded, share 1"]
+    for key in ("success", "success_final"):
+        assert replayed[key][0] == moving[key][0] and len(replayed[key]) == 3
+    assert (tmp_path / "robustness_partner.png").stat().st_size > 5000
+    assert robustness.main([*partner, "--partner-shares", "1.5"]) == 2
 
 
 def test_study_make_renders_blind_pairs_from_identical_starts(hand_run, tmp_path):

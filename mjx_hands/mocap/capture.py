@@ -163,4 +163,6 @@ def to_demonstration(
         actor_palm_rot=target_rot_t @ take.actor.palm_rot,
         contact_begin=window[0],
         contact_end=window[1],
+        target_palm_rot=take.target.palm_rot,
+        target_palm_pos=take.target.palm_pos,
     )

@@ -55,6 +55,10 @@ QUAT_DROPOUT_NORM = 0.5
 """Release quaternions with a smaller norm (zeros) or a NaN are capture dropouts."""
 
 
+ROTATION_TOLERANCE = 1e-4
+"""Largest |R^T R - I| entry of a stored rotation matrix (float32 round trips: ~1e-7)."""
+
+
 class MocapError(ValueError):
     """Demonstration data that is missing, malformed or inconsistent."""
 
@@ -154,6 +158,14 @@ class Demonstration:
     target_frames: (T, 6, 3, 3) target palm (identity) and distal bodies th..lf.
     contact_begin: frame index where contact starts.
     contact_end: frame index where contact ends (<= T-1).
+    target_palm_rot: (T, 3, 3) the target palm's own turning: its axes at each frame in
+      its frame of the window's first frame (so ``[0]`` is the identity). A source that
+      recorded no orientation (the project's designed demonstrations, schema-1 files)
+      holds the identity: a target that does not turn.
+    target_palm_pos: (T, 3) or None: the target palm centre in the same frame (``[0]``
+      zero), where the source recorded it (imported takes); None where only the
+      palm-to-palm vector was recorded (the authors' release), for which
+      :mod:`mjx_hands.partner` models the target's share of the approach.
     """
 
     task: str
@@ -168,6 +180,13 @@ class Demonstration:
     target_frames: np.ndarray
     contact_begin: int
     contact_end: int
+    target_palm_rot: np.ndarray | None = None
+    target_palm_pos: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.target_palm_rot is None:  # frozen dataclass: set the documented default
+            turn = np.broadcast_to(np.eye(3), (self.num_frames, 3, 3)).copy()
+            object.__setattr__(self, "target_palm_rot", turn)
 
     @property
     def num_frames(self) -> int:
@@ -190,7 +209,10 @@ class Demonstration:
             "actor_palm_rot": (t, 3, 3),
             "target_points": (t, n, 3),
             "target_frames": (t, n, 3, 3),
+            "target_palm_rot": (t, 3, 3),
         }
+        if self.target_palm_pos is not None:
+            shapes["target_palm_pos"] = (t, 3)
         for field, shape in shapes.items():
             value = getattr(self, field)
             if not isinstance(value, np.ndarray) or value.shape != shape:
@@ -200,6 +222,13 @@ class Demonstration:
                 raise MocapError(f"{self.name}: {field} has non-finite values")
         if t < 2:
             raise MocapError(f"{self.name}: needs at least 2 frames, got {t}")
+        rot = self.target_palm_rot
+        orthonormal = np.abs(np.swapaxes(rot, -1, -2) @ rot - np.eye(3)).max()
+        if orthonormal > ROTATION_TOLERANCE or np.linalg.det(rot).min() < 0:
+            raise MocapError(
+                f"{self.name}: target_palm_rot must hold rotation matrices (got an error of "
+                f"{orthonormal:.3g} from orthonormal, expected <= {ROTATION_TOLERANCE})"
+            )
         if not 0 <= self.contact_begin <= self.contact_end <= t - 1:
             raise MocapError(
                 f"{self.name}: contact_begin/contact_end must satisfy 0 <= begin <= end <= "
@@ -302,6 +331,8 @@ def build_demonstration(
     actor_palm_rot: np.ndarray,
     contact_begin: int,
     contact_end: int,
+    target_palm_rot: np.ndarray | None = None,
+    target_palm_pos: np.ndarray | None = None,
 ) -> Demonstration:
     """A Demonstration from joint angles and the actor palm pose; fingertips by FK.
 
@@ -309,7 +340,20 @@ def build_demonstration(
       actor_joints, target_joints: (T, 20) in the model convention (clipped here).
       actor_palm_pos: (T, 3) actor palm centre in the target palm frame.
       actor_palm_rot: (T, 3, 3) actor palm axes in the target palm frame.
+      target_palm_rot: (T, 3, 3) the target palm's axes in any fixed frame (re-expressed
+        here in its frame of frame 0); None: a target that does not turn.
+      target_palm_pos: (T, 3) the target palm centre in that same fixed frame; None:
+        not recorded.
     """
+    if target_palm_rot is not None:
+        target_palm_rot = np.asarray(target_palm_rot, np.float64)
+        first = target_palm_rot[0].T
+        if target_palm_pos is not None:
+            target_palm_pos = np.asarray(target_palm_pos, np.float64)
+            target_palm_pos = (target_palm_pos - target_palm_pos[0]) @ first.T
+        target_palm_rot = first @ target_palm_rot
+    elif target_palm_pos is not None:
+        raise MocapError(f"{name}: target_palm_pos needs the target_palm_rot of its frame")
     actor_joints = hand_kinematics.clip_to_range(np.asarray(actor_joints, np.float64))
     target_joints = hand_kinematics.clip_to_range(np.asarray(target_joints, np.float64))
     actor_palm_pos = np.asarray(actor_palm_pos, np.float64)
@@ -330,6 +374,8 @@ def build_demonstration(
         target_frames=target.frames,
         contact_begin=int(contact_begin),
         contact_end=int(contact_end),
+        target_palm_rot=target_palm_rot,
+        target_palm_pos=target_palm_pos,
     ).validate()
 
 

@@ -22,8 +22,11 @@ from mjx_hands.mocap.demonstration import (
 )
 from mjx_hands.shadow_hand import HAND_JOINTS
 
-SCHEMA_VERSION = 1
-"""Version of the ``mocap_data/<task>.npz`` layout (see mocap_data/README.md)."""
+SCHEMA_VERSION = 2
+"""Version of the ``mocap_data/<task>.npz`` layout (see mocap_data/README.md). Version 2
+added the optional target motion arrays; version-1 files are read as targets that
+neither turn nor record their position."""
+READABLE_VERSIONS = (1, 2)
 
 
 # ------------------------------------------------------------ the project's own files
@@ -34,6 +37,10 @@ _NPZ_PER_FRAME = {
     "actor_palm_pos": (3,),
     "actor_palm_quat": (4,),
 }
+_NPZ_OPTIONAL = {  # the target's own motion (schema 2): per frame, absent -> not recorded
+    "target_palm_quat": (4,),
+    "target_palm_pos": (3,),
+}
 _NPZ_DTYPES = {
     "schema_version": "int",
     "task": "str",
@@ -42,7 +49,7 @@ _NPZ_DTYPES = {
     "num_frames": "int",
     "contact_begin": "int",
     "contact_end": "int",
-    **{key: "float" for key in _NPZ_PER_FRAME},
+    **{key: "float" for key in (*_NPZ_PER_FRAME, *_NPZ_OPTIONAL)},
 }
 """Every array of the npz layout and the dtype kind it must have (see :func:`check_dtype`)."""
 
@@ -58,7 +65,14 @@ def demos_to_arrays(demos: list[Demonstration]) -> dict[str, np.ndarray]:
     if any(d.task != task for d in demos):
         raise MocapError("all demonstrations of one file must share a task")
     cat = lambda f: np.concatenate([f(d) for d in demos]).astype(np.float32)
-    return {
+    recorded = [d.target_palm_pos is not None for d in demos]
+    if any(recorded) and not all(recorded):
+        raise MocapError(
+            "demonstrations of one file must all record the target palm position or none "
+            f"(recorded by {sum(recorded)} of {len(demos)})"
+        )
+    optional = {"target_palm_pos": cat(lambda d: d.target_palm_pos)} if all(recorded) else {}
+    return optional | {
         "schema_version": np.int64(SCHEMA_VERSION),
         "task": np.str_(task),
         "names": np.array([d.name for d in demos]),
@@ -70,6 +84,7 @@ def demos_to_arrays(demos: list[Demonstration]) -> dict[str, np.ndarray]:
         "target_joints": cat(lambda d: d.target_joints),
         "actor_palm_pos": cat(lambda d: d.actor_points[:, 0]),
         "actor_palm_quat": cat(lambda d: matrix_to_quat_wxyz(d.actor_palm_rot)),
+        "target_palm_quat": cat(lambda d: matrix_to_quat_wxyz(d.target_palm_rot)),
     }
 
 
@@ -85,7 +100,11 @@ def _npz_frame_checks(where: str, arrays: dict[str, np.ndarray]) -> None:
         ("target_joints", "angle", HAND_JOINTS),
         ("actor_palm_pos", "length", None),
         ("actor_palm_quat", "norm", None),
+        ("target_palm_quat", "norm", None),
+        ("target_palm_pos", "length", None),
     ]:
+        if key not in arrays:
+            continue
         values = arrays[key] if quantity == "angle" else vector_norm(arrays[key])
         check_bounds(where, key, quantity, values, columns=columns, at="row")
 
@@ -98,7 +117,7 @@ def demos_from_arrays(arrays, task: str, source: str, where: str = "arrays") -> 
     an error too (nothing in a file is silently ignored). Raises MocapError naming
     ``where`` and the array.
     """
-    missing = [key for key in _NPZ_DTYPES if key not in arrays]
+    missing = [key for key in _NPZ_DTYPES if key not in arrays and key not in _NPZ_OPTIONAL]
     if missing:
         raise MocapError(f"{where}: missing array {missing[0]!r}")
     unknown = sorted(set(arrays) - set(_NPZ_DTYPES))
@@ -107,14 +126,17 @@ def demos_from_arrays(arrays, task: str, source: str, where: str = "arrays") -> 
             f"{where}: unknown array {unknown[0]!r} (got {len(arrays)} arrays, expected "
             f"only {', '.join(_NPZ_DTYPES)} of schema {SCHEMA_VERSION})"
         )
-    a = {key: np.asarray(arrays[key]) for key in _NPZ_DTYPES}
+    a = {key: np.asarray(arrays[key]) for key in _NPZ_DTYPES if key in arrays}
     for key, kind in _NPZ_DTYPES.items():
-        check_dtype(where, key, a[key], kind)
+        if key in a:
+            check_dtype(where, key, a[key], kind)
     check_shape(where, "schema_version", a["schema_version"], ())
-    if int(a["schema_version"]) != SCHEMA_VERSION:
-        raise MocapError(
-            f"{where}: schema_version {int(a['schema_version'])}, expected {SCHEMA_VERSION}"
-        )
+    version = int(a["schema_version"])
+    if version not in READABLE_VERSIONS:
+        raise MocapError(f"{where}: schema_version {version}, expected one of {READABLE_VERSIONS}")
+    newer = sorted(key for key in _NPZ_OPTIONAL if key in a)
+    if version < 2 and newer:
+        raise MocapError(f"{where}: array {newer[0]!r} needs schema_version 2, got {version}")
     check_shape(where, "task", a["task"], ())
     if str(a["task"]) != task:
         raise MocapError(f"{where}: holds task {str(a['task'])!r}, expected {task!r}")
@@ -132,14 +154,19 @@ def demos_from_arrays(arrays, task: str, source: str, where: str = "arrays") -> 
             f"{where}: num_frames of demonstration {i} too small (got {lengths[i]}, expected >= 2)"
         )
     total = sum(lengths)
-    for key, tail in _NPZ_PER_FRAME.items():
-        check_shape(where, key, a[key], (total, *tail))
+    for key, tail in (_NPZ_PER_FRAME | _NPZ_OPTIONAL).items():
+        if key in a:
+            check_shape(where, key, a[key], (total, *tail))
     _npz_frame_checks(where, a)
     bounds = np.concatenate([[0], np.cumsum(lengths)])
     demos = []
     for i in range(n):
         f = slice(int(bounds[i]), int(bounds[i + 1]))
         quat = np.asarray(a["actor_palm_quat"][f], np.float64)
+        turn = a.get("target_palm_quat")
+        turn = None if turn is None else quat_wxyz_to_matrix(np.asarray(turn[f], np.float64))
+        path = a.get("target_palm_pos")
+        path = None if path is None else np.asarray(path[f], np.float64)
         try:
             demo = build_demonstration(
                 task=task,
@@ -152,6 +179,8 @@ def demos_from_arrays(arrays, task: str, source: str, where: str = "arrays") -> 
                 actor_palm_rot=quat_wxyz_to_matrix(quat),
                 contact_begin=int(a["contact_begin"][i]),
                 contact_end=int(a["contact_end"][i]),
+                target_palm_rot=turn,
+                target_palm_pos=path,
             )
         except MocapError as e:  # Demonstration.validate names the demonstration only
             raise MocapError(f"{where}: {e}") from e

@@ -516,6 +516,8 @@ def apply_index_alignment(demos: list[Demonstration], align: IndexAlignment) -> 
                 actor_palm_rot=rot,
                 contact_begin=d.contact_begin,
                 contact_end=d.contact_end,
+                target_palm_rot=d.target_palm_rot,
+                target_palm_pos=d.target_palm_pos,
             )
         )
     return out
@@ -637,6 +639,7 @@ def load_optitrack(
                 actor_palm_rot=rot,
                 contact_begin=c0 - s,
                 contact_end=c1 - s,
+                target_palm_rot=r_t,  # the palm's own turning; its position is not recorded
             )
         )
     if task == "et" and align_et_index:
