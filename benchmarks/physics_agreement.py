@@ -26,7 +26,6 @@ well): which setting causes how much of the disagreement in contact, and at what
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import json
 import sys
@@ -85,36 +84,55 @@ def native_transitions(env, episodes: int, close: float, seed: int) -> dict[str,
     }
 
 
-def mjx_periods(
-    model: mujoco.MjModel, impl: str, n_substeps: int, t: dict[str, np.ndarray], contacts: int
-):
-    """(qpos after one control period (N, nq), periods per second) of MJX ``impl`` from
-    every transition's start; Warp with room for ``contacts`` contacts per world."""
-    if impl == "warp":  # MuJoCo Warp refuses the flag; it only changes what a blow-up does
-        model = copy.copy(model)
-        model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
-    m = mjx.put_model(model, impl=impl)
-    # Warp keeps room for a fixed number of contacts (48 by default; with the hands' 400
-    # worlds 256 overflowed its broadphase and cost 1e-2 rad in contact, 4096 did not).
-    sizes = {"naconmax": contacts} if impl == "warp" else {}
-    template = mjx.put_data(model, mujoco.MjData(model), impl=impl, **sizes)
+TRANSITION_KEYS = ("qpos", "qvel", "time", "ctrl", "mocap_pos", "mocap_quat")
+"""A transition's start, in the order the period functions take it."""
 
-    def period(qpos, qvel, time, ctrl, mocap_pos, mocap_quat):
-        given = {"qpos": qpos, "qvel": qvel, "time": time, "ctrl": ctrl}
-        given |= {"mocap_pos": mocap_pos, "mocap_quat": mocap_quat}
-        # In the template's precision (float64 under JAX_ENABLE_X64=1).
+
+def timed_periods(period, t: dict[str, np.ndarray]):
+    """(qpos after one control period (N, nq), periods per second) of ``period`` (one
+    transition's start -> qpos) vmapped over every transition, timed after its compile."""
+    run = jax.jit(jax.vmap(period))
+    args = [jnp.asarray(t[k]) for k in TRANSITION_KEYS]
+    jax.block_until_ready(run(*args))  # compile (and warm up)
+    start = time.perf_counter()
+    qpos = np.asarray(jax.block_until_ready(run(*args)))
+    return qpos, len(t["qpos"]) / (time.perf_counter() - start)
+
+
+def jax_periods(model: mujoco.MjModel, n_substeps: int, t: dict[str, np.ndarray]):
+    """:func:`timed_periods` of MJX's JAX implementation of ``model`` from every
+    transition's start (in the model's precision: float64 under JAX_ENABLE_X64=1)."""
+    m = mjx.put_model(model)
+    template = mjx.put_data(model, mujoco.MjData(model))
+
+    def period(*start):
+        given = dict(zip(TRANSITION_KEYS, start, strict=True))
         d = template.replace(**{k: v.astype(getattr(template, k).dtype) for k, v in given.items()})
         with jax.default_matmul_precision("highest"):
             d = mjx.step(m, d)  # first step outside: under x64 it settles the carry's dtypes
             d = jax.lax.fori_loop(1, n_substeps, lambda _, d: mjx.step(m, d), d)
         return d.qpos
 
-    run = jax.jit(jax.vmap(period))
-    args = [jnp.asarray(t[k]) for k in ("qpos", "qvel", "time", "ctrl", "mocap_pos", "mocap_quat")]
-    jax.block_until_ready(run(*args))  # compile (and warm up)
-    start = time.perf_counter()
-    qpos = np.asarray(jax.block_until_ready(run(*args)))
-    return qpos, len(t["qpos"]) / (time.perf_counter() - start)
+    return timed_periods(period, t)
+
+
+def warp_periods(env, t: dict[str, np.ndarray], contacts_per_world: int):
+    """:func:`timed_periods` of the environment's own MuJoCo Warp physics
+    (``physics.WarpPhysics``, as ``--physics warp`` trains with) from every transition's
+    start, with room for ``contacts_per_world`` contacts per simulation."""
+    warp = physics.WarpPhysics(
+        env.mj_model,
+        env.n_substeps,
+        env.config.contact_distance,
+        worlds=len(t["qpos"]),
+        contacts_per_world=contacts_per_world,
+    )
+
+    def period(qpos, qvel, time, ctrl, mocap_pos, mocap_quat):
+        state = physics.rest_state(env.mj_model, warp.actuated_qadr, qpos, mocap_pos, mocap_quat)
+        return warp.step(state.replace(qvel=qvel, time=time), ctrl).qpos
+
+    return timed_periods(period, t)
 
 
 def summary(diff: np.ndarray) -> dict[str, float]:
@@ -135,7 +153,11 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
     parser.add_argument(
-        "--warp-contacts", type=int, default=4096, help="Warp's naconmax (256 overflowed)"
+        "--warp-contacts-per-world",
+        type=int,
+        default=physics.WARP_CONTACTS_PER_WORLD,
+        help="contacts MuJoCo Warp keeps room for per simulation (naconmax / worlds; "
+        "256 for 400 worlds overflowed)",
     )
     parser.add_argument(
         "--settings",
@@ -154,7 +176,7 @@ def main(argv: list[str] | None = None) -> dict:
         "episodes": args.episodes,
         "close": args.close,
         "seed": args.seed,
-        "warp_contacts": args.warp_contacts,
+        "warp_contacts_per_world": args.warp_contacts_per_world,
     }
     for name in args.settings:
         impls = [i for i in args.impls if name == "scene" or i == "jax"]
@@ -190,7 +212,10 @@ def agreement(args, overrides: dict, impls: list[str]) -> dict:
     for impl in impls:
         print(f"MJX {impl}: {len(t['qpos'])} control periods ...", flush=True)
         try:
-            qpos, rate = mjx_periods(model, impl, env.n_substeps, t, args.warp_contacts)
+            if impl == "warp":
+                qpos, rate = warp_periods(env, t, args.warp_contacts_per_world)
+            else:
+                qpos, rate = jax_periods(model, env.n_substeps, t)
         except (ImportError, RuntimeError, NotImplementedError, ValueError) as err:  # e.g. no warp
             record["impls"][impl] = {"error": f"{type(err).__name__}: {err}"}
             print(f"  {impl}: {type(err).__name__}: {err}", file=sys.stderr)

@@ -51,6 +51,12 @@ class InteractionEnv(Protocol):
 
     def step(self, state: State, action: jax.Array) -> State: ...
 
+    def reserve(self, worlds: int) -> None:
+        """Room for ``worlds`` simulations stepped together (a learner's members x
+        environments), called before the programs that step them are traced; a no-op
+        where the physics sizes nothing ahead (MuJoCo Warp does)."""
+        ...
+
     def describe(self) -> str:
         """One line for the run's output: the task's data and physics."""
         ...

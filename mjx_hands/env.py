@@ -336,6 +336,9 @@ class HandInteractionEnv(Env):
     def backend(self) -> str:
         return self.physics.name
 
+    def reserve(self, worlds: int) -> None:
+        self.physics.reserve(worlds)
+
     def describe(self) -> str:
         source = self.demos[0].source if self.demos else "no"
         return f"{len(self.demos)} demonstrations ({source}), {self.backend} physics"

@@ -101,6 +101,11 @@ class Physics(Protocol):
         """The readings of ``state`` (of the last substep's kinematics, as MuJoCo's
         sensors of an ``mj_step``)."""
 
+    def reserve(self, worlds: int) -> None:
+        """Room for ``worlds`` simulations stepped in one call (a learner's members x
+        environments), before the program that steps them is traced; a no-op where the
+        engine sizes nothing ahead."""
+
 
 def sensor_objects(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     """From the scene's sensors: the sites of the 6 points (6,) and the contact-sensor
@@ -201,6 +206,9 @@ class MjxPhysics:
             penetration=jnp.maximum(-jnp.min(contact.dist, initial=jnp.inf), 0.0),
             finite=jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all(),
         )
+
+    def reserve(self, worlds: int) -> None:
+        """MJX sizes each simulation alone: nothing to reserve."""
 
 
 def put_model(mj_model: mujoco.MjModel) -> mjx.Model:
@@ -327,6 +335,9 @@ class NativePhysics:
     def readings(self, state: NativeState) -> Readings:
         return sensor_readings(state, self.contact_distance)
 
+    def reserve(self, worlds: int) -> None:
+        """``mujoco.rollout`` takes any batch: nothing to reserve."""
+
     # ------------------------------------------------------------- the callback
     def _rollout(self, state: NativeState, nstep: int):
         """(qpos, qvel, time, sensordata) after ``nstep`` physics steps; under vmap one
@@ -398,6 +409,7 @@ class WarpPhysics:
         contact_distance: float,
         worlds: int = WARP_WORLDS,
         constraints: int = WARP_CONSTRAINTS,
+        contacts_per_world: int = WARP_CONTACTS_PER_WORLD,
     ):
         try:
             import warp  # MJX's Warp implementation needs it
@@ -429,6 +441,7 @@ class WarpPhysics:
         )
         self.warp_model = model.replace(opt=model.opt.replace(_impl=impl))
         self.constraints = constraints
+        self.contacts_per_world = contacts_per_world
         self.worlds = 0
         self.reserve(worlds)
 
@@ -443,7 +456,7 @@ class WarpPhysics:
         self.template = mjx.make_data(
             self.native_model,
             impl="warp",
-            naconmax=WARP_CONTACTS_PER_WORLD * worlds,
+            naconmax=self.contacts_per_world * worlds,
             njmax=self.constraints,
         )
 

@@ -50,6 +50,9 @@ class PointReach(Env):
     def backend(self) -> str:
         return "jax"
 
+    def reserve(self, worlds: int) -> None:
+        """Pure JAX: nothing to size ahead."""
+
     def describe(self) -> str:
         return "point reach (pure JAX)"
 

@@ -69,8 +69,8 @@ def _shared_learner(members: tuple[TrainConfig, ...], devices, env_factory):
     config = members[0]
     num_devices = len(devices or jax.devices())  # batches are split over every process's
     train_env, eval_env, single = (env_factory or make_envs)(config, num_devices)
-    if getattr(single, "backend", None) == "warp":  # one Warp call steps every member's envs
-        single.physics.reserve(len(members) * max(train_env.num_envs, eval_env.num_envs))
+    # One physics call steps every member's environments (MuJoCo Warp sizes for them).
+    single.reserve(len(members) * max(train_env.num_envs, eval_env.num_envs))
     setup = learners.LearnerSetup(
         config=config,
         train_env=train_env,
