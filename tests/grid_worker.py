@@ -20,14 +20,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import jax
 import numpy as np
-from test_training import _config, point_factory
+from tiny import point_config, point_factory
 
 from mjx_hands import checkpoint, cluster, experiments, training
 
 
 def main(argv: list[str]) -> None:
     grid_dir, epochs, processes, process_id, port = argv[0], *map(int, argv[1:5])
-    train = _config(Path(grid_dir), epochs=epochs, eval_every=1, checkpoint_every=1)
+    train = point_config(Path(grid_dir), epochs=epochs, eval_every=1, checkpoint_every=1)
     grid = experiments.GridConfig(
         variants=("full",),
         seeds=2,

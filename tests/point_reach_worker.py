@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from test_training import _config, point_factory
+from tiny import point_config, point_factory
 
 from mjx_hands import checkpoint, training
 
@@ -34,7 +34,7 @@ def main(argv: list[str]) -> None:
 
         checkpoint._write_digest = holding
     training.run(
-        _config(run_dir, epochs=epochs, eval_every=2), out=sys.stdout, env_factory=point_factory
+        point_config(run_dir, epochs=epochs, eval_every=2), out=sys.stdout, env_factory=point_factory
     )
 
 

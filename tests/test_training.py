@@ -25,41 +25,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from compiles import counting_traces
+from tiny import POINT_DDPG, point_config, point_factory
 
 from mjx_hands import brax_agents, checkpoint, reward_params, run_directory, train_config, training
 from mjx_hands.agents.ddpg import DDPGConfig
-from mjx_hands.env import BatchedEnv
 from mjx_hands.env_config import EnvConfig
 from mjx_hands.point_reach import PointReach
 
 ROOT = Path(__file__).resolve().parents[1]
-
-SMALL = DDPGConfig(
-    hidden_sizes=(32, 32),
-    batch_size=64,
-    replay_capacity=4_000,
-    min_replay_size=160,
-    unroll_length=5,
-    updates_per_iteration=4,
-    iterations_per_epoch=4,
-)
-
-
-def point_factory(config: train_config.TrainConfig, num_devices: int, env_class=PointReach):
-    single = env_class()
-    return (
-        BatchedEnv(single, config.num_envs // num_devices),
-        BatchedEnv(single, config.eval_envs // num_devices),
-        single,
-    )
-
-
-def _config(run_dir: Path, **overrides) -> train_config.TrainConfig:
-    base = train_config.TrainConfig(
-        num_envs=16, eval_envs=16, epochs=4, eval_every=2, run_dir=str(run_dir), ddpg=SMALL
-    )
-    return dataclasses.replace(base, **overrides)
-
 
 def _learner(run_dir: Path) -> dict:
     meta = checkpoint.read_metadata(run_dir / "checkpoints")
@@ -73,7 +46,7 @@ def _learner(run_dir: Path) -> dict:
 
 
 TD3 = dataclasses.replace(  # every learner option at once
-    SMALL,
+    POINT_DDPG,
     twin_critics=True,
     target_policy_noise=0.2,
     actor_update_interval=2,
@@ -84,22 +57,22 @@ TD3 = dataclasses.replace(  # every learner option at once
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("ddpg", [SMALL, TD3], ids=["ddpg", "td3_options"])
+@pytest.mark.parametrize("ddpg", [POINT_DDPG, TD3], ids=["ddpg", "td3_options"])
 def test_resume_equals_an_uninterrupted_run(tmp_path, ddpg):
     full = training.run(
-        _config(tmp_path / "full", ddpg=ddpg), out=io.StringIO(), env_factory=point_factory
+        point_config(tmp_path / "full", ddpg=ddpg), out=io.StringIO(), env_factory=point_factory
     )
     assert full["epochs"] == 4 and full["last_checkpoint"] == 4
 
     half = training.run(
-        _config(tmp_path / "split", epochs=2, ddpg=ddpg),
+        point_config(tmp_path / "split", epochs=2, ddpg=ddpg),
         out=io.StringIO(),
         env_factory=point_factory,
     )
     assert half["last_checkpoint"] == 2
     log = io.StringIO()
     resumed = training.run(
-        _config(tmp_path / "split", resume=True, ddpg=ddpg), out=log, env_factory=point_factory
+        point_config(tmp_path / "split", resume=True, ddpg=ddpg), out=log, env_factory=point_factory
     )
     assert "resumed from epoch 2" in log.getvalue()
     assert resumed["epochs"] == 4
@@ -127,11 +100,11 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, ddpg):
 def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
-        _config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
     )
     config = json.loads((run_dir / "config.json").read_text())
     assert config["num_envs"] == 16 and config["ddpg"]["batch_size"] == 64
-    expected = _config(run_dir, epochs=2, eval_every=1)
+    expected = point_config(run_dir, epochs=2, eval_every=1)
     assert train_config.config_from_json(config) == train_config.resolved(expected)
     # Every reward knob is recorded as a number; runs from before read as the defaults
     # they trained with, and a named set (grids of 2026-12-02) as its numbers.
@@ -164,7 +137,7 @@ def test_run_directory_holds_config_metrics_tensorboard_checkpoint_and_plot(tmp_
 def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
     run_dir = tmp_path / "run"
     summary = training.run(
-        _config(run_dir, epochs=6, eval_every=1), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=6, eval_every=1), out=io.StringIO(), env_factory=point_factory
     )
     with open(run_dir / "metrics.csv") as f:
         rows = [{k: float(v) for k, v in r.items() if v} for r in csv.DictReader(f)]
@@ -191,15 +164,15 @@ def test_best_policy_is_kept_from_the_best_evaluation(tmp_path):
 def test_existing_run_is_not_overwritten_without_resume(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
-        _config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
     )
     with pytest.raises(FileExistsError, match="--resume"):
-        training.run(_config(run_dir, epochs=1), out=io.StringIO(), env_factory=point_factory)
+        training.run(point_config(run_dir, epochs=1), out=io.StringIO(), env_factory=point_factory)
     # Resuming with different networks is refused with the offending setting named.
-    other = dataclasses.replace(SMALL, hidden_sizes=(16, 16))
+    other = dataclasses.replace(POINT_DDPG, hidden_sizes=(16, 16))
     with pytest.raises(checkpoint.CheckpointError, match="ddpg.hidden_sizes"):
         training.run(
-            _config(run_dir, ddpg=other, resume=True), out=io.StringIO(), env_factory=point_factory
+            point_config(run_dir, ddpg=other, resume=True), out=io.StringIO(), env_factory=point_factory
         )
 
 
@@ -207,9 +180,9 @@ def test_existing_run_is_not_overwritten_without_resume(tmp_path):
 def test_checkpoint_of_another_shape_is_refused_naming_the_array(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
-        _config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=1, eval_every=1), out=io.StringIO(), env_factory=point_factory
     )
-    config = _config(run_dir, ddpg=dataclasses.replace(SMALL, hidden_sizes=(16, 16)))
+    config = point_config(run_dir, ddpg=dataclasses.replace(POINT_DDPG, hidden_sizes=(16, 16)))
     algo, _ = training.make_learner(config, env_factory=point_factory)
     like = algo.checkpoint_tree(algo.init(jax.random.PRNGKey(0)), True)
     with pytest.raises(
@@ -230,7 +203,7 @@ class ExplodingReach(PointReach):
 def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
-        _config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=2, eval_every=1), out=io.StringIO(), env_factory=point_factory
     )
     before = _learner(run_dir)
 
@@ -241,7 +214,7 @@ def test_divergence_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
         training.TrainingDiverged, match=r"epoch 3.*last good checkpoint \(epoch 2\)"
     ):
         training.run(
-            _config(run_dir, epochs=4, eval_every=1, resume=True),
+            point_config(run_dir, epochs=4, eval_every=1, resume=True),
             out=io.StringIO(),
             env_factory=exploding,
         )
@@ -271,7 +244,7 @@ def test_sigterm_stops_the_run_like_ctrl_c_and_keeps_the_checkpoint(tmp_path):
     before = signal.getsignal(signal.SIGTERM)
     out = _TerminateAt("epoch    2/")
     result = training.run(
-        _config(run_dir, epochs=6, eval_every=1), out=out, env_factory=point_factory
+        point_config(run_dir, epochs=6, eval_every=1), out=out, env_factory=point_factory
     )
     assert result["stop_reason"] == "interrupted"
     assert "interrupted; the last checkpoint (epoch 1)" in out.getvalue()
@@ -574,15 +547,15 @@ def test_evaluate_names_a_missing_run(capsys):
 @pytest.mark.slow
 def test_brax_trainers_run_on_the_same_env_api(algo, tmp_path):
     run_dir = tmp_path / algo
-    config = _config(
+    config = point_config(
         run_dir,
         algo=algo,
         epochs=4,
         eval_every=2,
         sac=brax_agents.SACConfig.like(
-            dataclasses.replace(SMALL, min_replay_size=64, replay_capacity=2_000)
+            dataclasses.replace(POINT_DDPG, min_replay_size=64, replay_capacity=2_000)
         ),
-        ppo=brax_agents.PPOConfig.like(SMALL),
+        ppo=brax_agents.PPOConfig.like(POINT_DDPG),
     )
     services = training.run_services(config, out=io.StringIO(), env_factory=point_factory)
     summary = brax_agents.run(config, services)
@@ -641,7 +614,7 @@ def test_resume_from_the_command_line_starts_from_the_runs_own_config(tmp_path):
     from mjx_hands import train_cli
 
     run_dir = tmp_path / "run"
-    config = _config(run_dir, epochs=1, eval_every=1, seed=5)
+    config = point_config(run_dir, epochs=1, eval_every=1, seed=5)
     training.run(config, out=io.StringIO(), env_factory=point_factory)
     resumed = train_cli.default_config(["--run-dir", str(run_dir), "--resume", "--epochs", "3"])
     assert resumed == train_config.resolved(config)  # tyro applies --epochs on top
@@ -687,13 +660,13 @@ def test_invalid_ddpg_sizes_are_refused():
 def test_resume_uses_the_checkpoints_own_replay_setting(tmp_path):
     run_dir = tmp_path / "run"
     training.run(
-        _config(run_dir, epochs=1, eval_every=1, save_replay=False),
+        point_config(run_dir, epochs=1, eval_every=1, save_replay=False),
         out=io.StringIO(),
         env_factory=point_factory,
     )
     log = io.StringIO()
     summary = training.run(
-        _config(run_dir, epochs=2, eval_every=1, save_replay=True, resume=True),
+        point_config(run_dir, epochs=2, eval_every=1, save_replay=True, resume=True),
         out=log,
         env_factory=point_factory,
     )
@@ -718,10 +691,10 @@ def test_brax_trainers_refuse_a_run_directory_that_holds_a_run(tmp_path):
     run_dir.mkdir()
     (run_dir / "metrics.csv").write_text("epoch\n1\n")
     with pytest.raises(FileExistsError, match="choose another --run-dir for --algo ppo"):
-        config = _config(run_dir, algo="ppo")
+        config = point_config(run_dir, algo="ppo")
         brax_agents.run(config, training.run_services(config, io.StringIO(), point_factory))
     with pytest.raises(ValueError, match="--algo ppo has its own loop"):
-        training.run(_config(tmp_path / "other", algo="ppo"), out=io.StringIO())
+        training.run(point_config(tmp_path / "other", algo="ppo"), out=io.StringIO())
     assert (run_dir / "metrics.csv").read_text() == "epoch\n1\n"
 
 
@@ -760,7 +733,7 @@ def uninterrupted(tmp_path_factory):
     """The learner after 4 epochs of a run nothing happened to."""
     run_dir = tmp_path_factory.mktemp("uninterrupted") / "run"
     training.run(
-        _config(run_dir, epochs=4, eval_every=2), out=io.StringIO(), env_factory=point_factory
+        point_config(run_dir, epochs=4, eval_every=2), out=io.StringIO(), env_factory=point_factory
     )
     return _learner(run_dir)
 
@@ -796,7 +769,7 @@ def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, unin
         possible_starts = {2}
     else:
         training.run(
-            _config(run_dir, epochs=3, eval_every=2), out=io.StringIO(), env_factory=point_factory
+            point_config(run_dir, epochs=3, eval_every=2), out=io.StringIO(), env_factory=point_factory
         )
         _truncate_newest_state(run_dir)
         possible_starts = {2}
@@ -805,7 +778,7 @@ def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, unin
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         resumed = training.run(
-            _config(run_dir, epochs=4, eval_every=2, resume=True),
+            point_config(run_dir, epochs=4, eval_every=2, resume=True),
             out=log,
             env_factory=point_factory,
         )
@@ -826,21 +799,21 @@ def test_a_run_hit_by_a_fault_resumes_to_the_uninterrupted_result(tmp_path, unin
 def test_checkpoints_by_epoch_and_by_wall_clock_besides_evaluations(tmp_path):
     every_2 = tmp_path / "every2"
     training.run(
-        _config(every_2, epochs=3, eval_every=5, checkpoint_every=2),
+        point_config(every_2, epochs=3, eval_every=5, checkpoint_every=2),
         out=io.StringIO(),
         env_factory=point_factory,
     )
     assert checkpoint.steps(every_2 / "checkpoints") == [2, 3]  # 3: the last epoch
     by_clock = tmp_path / "clock"
     training.run(
-        _config(by_clock, epochs=3, eval_every=5, checkpoint_every=100, checkpoint_minutes=1e-6),
+        point_config(by_clock, epochs=3, eval_every=5, checkpoint_every=100, checkpoint_minutes=1e-6),
         out=io.StringIO(),
         env_factory=point_factory,
     )
     assert checkpoint.steps(by_clock / "checkpoints") == [1, 2, 3]
     assert checkpoint.steps(by_clock / "best") == [3]  # the policy only at evaluations
     # Resuming on another device count names the counts, not array shapes.
-    config = _config(by_clock, epochs=3, resume=True)
+    config = point_config(by_clock, epochs=3, resume=True)
     algo, _ = training.make_learner(config, env_factory=point_factory)
     with pytest.raises(
         checkpoint.CheckpointError, match=r"trained on 1 device\(s\), this run has 2"
@@ -857,7 +830,7 @@ def test_divergence_before_the_first_checkpoint_says_there_is_none(tmp_path):
         return point_factory(config, num_devices, env_class=ExplodingReach)
 
     with pytest.raises(training.TrainingDiverged, match="no checkpoint was saved yet") as err:
-        training.run(_config(tmp_path / "run", epochs=2), out=io.StringIO(), env_factory=exploding)
+        training.run(point_config(tmp_path / "run", epochs=2), out=io.StringIO(), env_factory=exploding)
     assert "checkpoints" not in str(err.value)
 
 

@@ -6,12 +6,15 @@ compile once between them when they run in one process (one xdist group)."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 
 from mjx_hands import train_config
 from mjx_hands.agents.ddpg import DDPGConfig
+from mjx_hands.env import BatchedEnv
 from mjx_hands.env_config import EnvConfig
+from mjx_hands.point_reach import PointReach
 
 HAND_DDPG = DDPGConfig(
     hidden_sizes=(32, 32),
@@ -50,3 +53,34 @@ def hand_cli_args() -> list[str]:
                  "updates_per_iteration", "iterations_per_epoch"):  # fmt: skip
         args += [f"--ddpg.{name.replace('_', '-')}", str(getattr(HAND_DDPG, name))]
     return args
+
+
+# ------------------------------------------------ the pure-JAX point-reach task
+POINT_DDPG = DDPGConfig(
+    hidden_sizes=(32, 32),
+    batch_size=64,
+    replay_capacity=4_000,
+    min_replay_size=160,
+    unroll_length=5,
+    updates_per_iteration=4,
+    iterations_per_epoch=4,
+)
+
+
+def point_factory(config: train_config.TrainConfig, num_devices: int, env_class=PointReach):
+    """The point-reach task's (train, eval, single) environments: ``training``'s
+    ``env_factory`` for tests that need the loop, not the hand."""
+    single = env_class()
+    return (
+        BatchedEnv(single, config.num_envs // num_devices),
+        BatchedEnv(single, config.eval_envs // num_devices),
+        single,
+    )
+
+
+def point_config(run_dir: Path, **overrides) -> train_config.TrainConfig:
+    """A small point-reach training config writing to ``run_dir``."""
+    base = train_config.TrainConfig(
+        num_envs=16, eval_envs=16, epochs=4, eval_every=2, run_dir=str(run_dir), ddpg=POINT_DDPG
+    )
+    return dataclasses.replace(base, **overrides)
