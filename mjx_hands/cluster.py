@@ -30,7 +30,9 @@ does), so the command parses these options first (:func:`early_config`).
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Sequence
+from typing import TextIO
 
 FLAG_PREFIX = "--cluster."
 
@@ -107,6 +109,14 @@ def is_primary() -> bool:
     import jax
 
     return jax.process_index() == 0
+
+
+def progress_stream(out: TextIO | None) -> TextIO | None:
+    """Where this process prints progress: ``out`` (None: stdout) on process 0, nowhere on
+    the others (they train the same members: one progress log)."""
+    if is_primary():
+        return out
+    return open(os.devnull, "w")
 
 
 def processes() -> int:

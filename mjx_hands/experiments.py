@@ -27,7 +27,6 @@ import csv
 import dataclasses
 import json
 import math
-import os
 import sys
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -132,8 +131,10 @@ def _grid_default(argv: list[str]) -> GridConfig:
 
 
 def run_grid(grid: GridConfig, out=None, env_factory=None) -> list[dict[str, Any]]:
-    """Train ``grid``; returns each member's summary (with its ``variant``)."""
+    """Train ``grid``; returns each member's summary (with its ``variant``). Progress goes
+    to ``out`` (None: stdout) from process 0 only."""
     _check_grid(grid)
+    out = cluster_lib.progress_stream(out)
     pairs = members(grid)
     run_dir = Path(grid.train.run_dir)
     record = {
@@ -195,9 +196,7 @@ def run_main(argv: list[str]) -> int:
         default = _grid_default(argv)
         grid = tyro.cli(GridConfig, default=default, args=argv, description=RUN_USAGE)
         compile_cache.enable()
-        # One progress log: the other processes train the same members.
-        out = None if cluster_lib.is_primary() else open(os.devnull, "w")  # noqa: SIM115
-        return run_grid(grid, out), grid
+        return run_grid(grid), grid
 
     result, code = train_cli.reported(start)
     if code:
