@@ -44,6 +44,7 @@ and reads contact from touch sensors.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable
 from typing import Any
@@ -69,7 +70,7 @@ from mjx_hands import (
 )
 from mjx_hands import shadow_hand as sh
 from mjx_hands.contract import InteractionEnv
-from mjx_hands.env_config import DEMO_SETS, EnvConfig, moving, reward_weights
+from mjx_hands.env_config import DEMO_SETS, EnvConfig, moving, reward_weights, static_partner
 
 TASKS = tasks.TASKS
 
@@ -957,6 +958,19 @@ def make_env(task: str = "handshake", num_envs: int | None = None, **overrides: 
         raise TypeError(f"unknown EnvConfig field(s) {unknown}; valid: {sorted(fields)}")
     env = HandInteractionEnv(EnvConfig(task=task, **overrides))
     return env if num_envs is None else BatchedEnv(env, num_envs)
+
+
+def scoring_env(config: EnvConfig) -> HandInteractionEnv:
+    """The environment that scores policies of ``config``'s task on the same episodes,
+    static- and robust-trained alike: ``config`` with the paper's static partner
+    (``env_config.static_partner``); one object per resulting setting, so that every
+    policy of a program shares its compiled rollouts."""
+    return _env_of(static_partner(config))
+
+
+@functools.lru_cache(maxsize=4)
+def _env_of(config: EnvConfig) -> HandInteractionEnv:
+    return HandInteractionEnv(config)
 
 
 def model_sizes(env: HandInteractionEnv) -> dict[str, int]:

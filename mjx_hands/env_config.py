@@ -197,6 +197,27 @@ def with_partners(config: EnvConfig, setup: str) -> EnvConfig:
     return dataclasses.replace(config, **ROBUST_PARTNERS)
 
 
+STATIC_PARTNER = {
+    "partner": "static",
+    "target_rotation_noise": 0.0,
+    "target_rotation_angle": None,
+    "target_orientation_range": None,
+    "target_speed": None,
+    "target_speed_range": None,
+    "target_position_noise": 0.0,
+    "action_delay": 0,
+}
+"""The paper's partner: a static hand at its nominal orientation, seen exactly, with
+actions applied at once."""
+
+
+def static_partner(config: EnvConfig) -> EnvConfig:
+    """``config`` with :data:`STATIC_PARTNER`: the conditions in which every policy of a
+    task is scored alike, whatever partner models it trained against (evaluation sweeps
+    then change one condition at a time)."""
+    return dataclasses.replace(config, **STATIC_PARTNER)
+
+
 def moving(config: EnvConfig) -> bool:
     """Whether ``config``'s target hand moves (``target_speed`` or ``target_speed_range``)."""
     return config.target_speed is not None or config.target_speed_range is not None

@@ -40,6 +40,7 @@ import numpy as np
 import tyro
 
 from mjx_hands import checkpoint, compile_cache, grids, policies, rollouts, statistics, tasks
+from mjx_hands import env as env_lib
 
 METRICS = ("dtw", "jerk", "path_ratio", "final_pose_error")
 """Per-episode metrics; lower is more natural (closer to the demonstrations) for all."""
@@ -293,7 +294,8 @@ def main(argv: list[str] | None = None) -> int:
         except (checkpoint.CheckpointError, ValueError, FileNotFoundError) as err:
             print(f"error: {entry['run_dir']}: {err}", file=sys.stderr)
             return 2
-        config, single, epoch = loaded.config, loaded.single, loaded.epoch
+        config, epoch = loaded.config, loaded.epoch
+        single = env_lib.scoring_env(loaded.single.config)  # the same partner for every policy
         metrics = policy_metrics(single, loaded.act, args.episodes, args.seed)
         per_policy.append(
             {

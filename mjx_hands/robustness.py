@@ -436,11 +436,15 @@ def plot_partner(summary: dict, path: Path) -> None:
 
 
 def load_runs(args: RobustnessArgs) -> list[tuple]:
-    """(run_dir, policy, env, epoch) per run; all of one task, else ValueError."""
+    """(run_dir, policy, env, epoch) per run; all of one task, else ValueError. The env is
+    the task's scoring environment (``env.scoring_env``): the static partner that every
+    sweep changes one condition of, whatever partner models a policy trained against."""
     loaded = []
     for run_dir in args.run_dirs:
         policy = policies.load_policy(Path(run_dir), eval_envs=args.chunk, best=args.best)
-        loaded.append((run_dir, policy.act, policy.single, policy.epoch))
+        # Every policy meets the same partner, whatever it trained against.
+        scoring = env_lib.scoring_env(policy.single.config)
+        loaded.append((run_dir, policy.act, scoring, policy.epoch))
     tasks = {single.config.task for _, _, single, _ in loaded}
     if len(tasks) > 1:
         raise ValueError(f"the runs are of different tasks {sorted(tasks)}; give runs of one task")

@@ -397,3 +397,25 @@ def test_the_robust_setup_is_named_recorded_and_its_flags_still_win(tmp_path):
     assert back == train_config.resolved(parsed)
     with pytest.raises(ValueError, match="unknown partners 'wild'"):
         env_config.with_partners(env_lib.EnvConfig(), "wild")
+
+
+def test_policies_are_scored_against_the_static_partner_whatever_they_trained_with():
+    from mjx_hands import env_config
+
+    nominal = env_lib.EnvConfig(task="et", mocap_source="synthetic", physics="native")
+    robust = dataclasses.replace(
+        env_config.with_partners(nominal, "robust"), action_delay=2
+    )
+    assert robust != nominal
+    assert env_config.static_partner(robust) == env_config.static_partner(nominal) == nominal
+    # Every partner model the config documents is reset (a new one must be added there).
+    documented = {
+        f.name
+        for f in dataclasses.fields(env_lib.EnvConfig)
+        if f.name.startswith(("target_rotation", "target_orientation", "target_speed"))
+        or f.name in ("target_position_noise", "action_delay", "partner")
+    }
+    assert documented <= set(env_config.STATIC_PARTNER)
+    # One scoring environment for both, so every policy of a program shares its compiles.
+    assert env_lib.scoring_env(robust) is env_lib.scoring_env(nominal)
+    assert env_lib.scoring_env(robust).config == nominal

@@ -140,3 +140,79 @@ def test_angle_grid_and_bad_options():
         robustness.check_args(args)
     for text in ("--out DIR", "--speeds", "--angle-step-deg"):
         assert text in str(err.value)
+
+
+def _write_sweeps(folder, rng, runs: int, episodes: int, natural: list[float] | None):
+    """Robustness records as `robustness --sweep all` writes them, of random per-run rates."""
+    import json
+
+    folder.mkdir(parents=True)
+    angles = robustness.angle_grid(60.0, 15.0)
+    common = {"task": "et", "runs": runs, "episodes": episodes}
+    per_run = lambda *shape: [rng.uniform(0, 1, shape) for _ in range(runs)]
+    sweeps = {
+        robustness.ORIENTATION_FILE: ({"angles_deg": angles.tolist()}, {"success_final": (9, 9)}),
+        robustness.MOTION_FILE: ({"speeds": [0.0, 0.2]}, {"success_final": (2,)}),
+        robustness.PARTNER_FILE: (
+            {"conditions": ["static", "recorded, share 0.5"]},
+            {"success_final": (2,)},
+        ),
+        robustness.SENSING_FILE: (
+            {"noise_mm": [0.0, 5.0], "delays": [0, 1]},
+            {"noise_success_final": (2,), "delay_success_final": (2,)},
+        ),
+    }
+    truth = {}
+    for name, (extra, keys) in sweeps.items():
+        values = {key: per_run(*shape) for key, shape in keys.items()}
+        summary = common | extra | robustness.combine(
+            [{k: v[r] for k, v in values.items()} for r in range(runs)], episodes
+        )
+        (folder / f"{name}.json").write_text(json.dumps(summary))
+        truth[name] = {k: np.stack(v) for k, v in values.items()}
+    if natural is not None:
+        policies = [{"dtw": d, "jerk": 2 * d} for d in natural]
+        (folder / "naturalness.json").write_text(json.dumps({"policies": policies}))
+    return angles, truth
+
+
+def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_path):
+    import json
+
+    from mjx_hands import partner_report
+
+    rng = np.random.default_rng(0)
+    _, static = _write_sweeps(tmp_path / "static", rng, 1, 32, None)
+    _, robust = _write_sweeps(tmp_path / "robust", rng, 3, 32, [0.1, 0.2, 0.4])
+    argv = ["static=" + str(tmp_path / "static"), "robust=" + str(tmp_path / "robust")]
+    assert partner_report.main([*argv, "--out", str(tmp_path / "out")]) == 0
+    report = json.loads((tmp_path / "out" / "side_by_side.json").read_text())
+    rows = {r["condition"]: r for r in report["rows"]}
+    # Within +-30 deg: the 5 x 5 centre cells; 3 runs: mean and SE over runs.
+    grids = robust[robustness.ORIENTATION_FILE]["success_final"]  # (3, 9, 9)
+    per_run = grids[:, 2:7, 2:7].mean(axis=(1, 2))
+    np.testing.assert_allclose(
+        rows["yaw x pitch within +-30 deg"]["robust"],
+        [per_run.mean(), per_run.std(ddof=1) / np.sqrt(3)],
+    )
+    # One run: the binomial error over every episode of the region.
+    one = static[robustness.ORIENTATION_FILE]["success_final"][0]
+    p = one[1:8, 1:8].mean()
+    np.testing.assert_allclose(
+        rows["yaw x pitch within +-45 deg"]["static"], [p, np.sqrt(p * (1 - p) / (32 * 49))]
+    )
+    np.testing.assert_allclose(rows["nominal pose"]["static"][0], one[4, 4])
+    speeds = robust[robustness.MOTION_FILE]["success_final"][:, 1]
+    np.testing.assert_allclose(rows["moving at 0.2 m/s"]["robust"][0], speeds.mean())
+    partner = robust[robustness.PARTNER_FILE]["success_final"][:, 1]
+    np.testing.assert_allclose(rows["recorded, share 0.5 partner"]["robust"][0], partner.mean())
+    delay = static[robustness.SENSING_FILE]["delay_success_final"][0, 1]
+    np.testing.assert_allclose(rows["action delay 1 step(s)"]["static"][0], delay)
+    np.testing.assert_allclose(rows["naturalness: jerk"]["robust"][0], 2 * 0.7 / 3)
+    assert rows["naturalness: dtw"]["static"] is None  # not measured for that setup
+    text = (tmp_path / "out" / "side_by_side.md").read_text()
+    assert text.splitlines()[0] == "| et: condition | static | robust |"
+    assert (tmp_path / "out" / "orientation_side_by_side.png").stat().st_size > 10_000
+    # Bad input is named.
+    assert partner_report.main(["static", "--out", str(tmp_path / "x")]) == 2
+    assert partner_report.main(["a=" + str(tmp_path), "--out", str(tmp_path / "x")]) == 2

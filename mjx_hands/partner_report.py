@@ -1,0 +1,221 @@
+"""Static-trained against robust-trained policies, side by side: one table, the heatmaps
+next to each other.
+
+    python -m mjx_hands.partner_report static=OUT_A robust=OUT_B --out DIR
+
+Each ``LABEL=FOLDER`` is the ``--out`` folder of ``mjx_hands.robustness --sweep all`` (and,
+where it was run there, of ``mjx_hands.naturalness``) over one setup's runs of one task.
+Every setup was scored on the same episodes against the same partner
+(``env.scoring_env``), so rows compare like with like. Writes ``side_by_side.md`` /
+``.json`` and ``orientation_side_by_side.png`` into ``--out``.
+
+Rows: success at the end at the nominal pose; averaged over the yaw x pitch cells within
++-30, +-45 and +-60 degrees; at each speed of the motion sweep; against the static target
+and the recorded partner; under sensing error and action delay; then the naturalness
+metrics (lower is closer to the demonstrations). Values are mean +- standard error over
+the setup's runs (one run: the binomial error over its episodes).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import tyro
+
+from mjx_hands import robustness
+
+REGIONS_DEG = (30.0, 45.0, 60.0)
+"""Half-widths of the yaw x pitch squares whose cells are averaged, degrees."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ReportArgs:
+    """Static-trained against robust-trained policies, side by side."""
+
+    setups: tyro.conf.Positional[tuple[str, ...]]
+    """LABEL=FOLDER per setup: a folder written by ``robustness --sweep all --out``."""
+    out: str = "partner_report"
+    """Folder for side_by_side.md / .json and orientation_side_by_side.png."""
+
+
+def parse_setups(specs: tuple[str, ...]) -> dict[str, Path]:
+    """{label: folder} from ``LABEL=FOLDER`` strings; ValueError naming a bad one."""
+    setups = {}
+    for spec in specs:
+        label, sep, folder = spec.partition("=")
+        if not sep or not label or not folder:
+            raise ValueError(f"setup {spec!r}: expected LABEL=FOLDER (e.g. static=runs/a)")
+        if label in setups:
+            raise ValueError(f"setup label {label!r} given twice")
+        if not (Path(folder) / f"{robustness.ORIENTATION_FILE}.json").is_file():
+            raise ValueError(
+                f"setup {label!r}: {folder} holds no {robustness.ORIENTATION_FILE}.json "
+                "(run python -m mjx_hands.robustness RUNS --sweep all --out FOLDER first)"
+            )
+        setups[label] = Path(folder)
+    if not setups:
+        raise ValueError("give at least one LABEL=FOLDER")
+    return setups
+
+
+def region_mask(angles_deg: np.ndarray, limit_deg: float) -> np.ndarray:
+    """(n, n) bool: the cells (rows pitch, columns yaw) with |yaw| and |pitch| <= limit."""
+    inside = np.abs(angles_deg) <= limit_deg + 1e-9
+    return inside[:, None] & inside[None, :]
+
+
+def mean_se(per_run: np.ndarray, samples: int) -> tuple[float, float]:
+    """Mean and standard error of per-run success rates (R,): over runs, or for one run
+    the binomial error over its ``samples`` episodes."""
+    mean = float(np.mean(per_run))
+    if len(per_run) > 1:
+        return mean, float(np.std(per_run, ddof=1) / math.sqrt(len(per_run)))
+    return mean, math.sqrt(mean * (1.0 - mean) / samples)
+
+
+def read_json(folder: Path, name: str) -> dict | None:
+    path = folder / f"{name}.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def setup_rows(folder: Path) -> dict[str, tuple[float, float]]:
+    """{condition: (mean, se)} of one setup, success at the end and naturalness."""
+    rows: dict[str, tuple[float, float]] = {}
+    orientation = read_json(folder, robustness.ORIENTATION_FILE)
+    angles = np.asarray(orientation["angles_deg"])
+    grids = np.asarray(orientation["success_final_per_run"])  # (R, n, n)
+    episodes = orientation["episodes"]
+    centre = len(angles) // 2
+    rows["nominal pose"] = mean_se(grids[:, centre, centre], episodes)
+    for limit in REGIONS_DEG:
+        mask = region_mask(angles, limit)
+        if limit <= angles.max() + 1e-9:
+            per_run = grids[:, mask].mean(axis=1)
+            rows[f"yaw x pitch within +-{limit:g} deg"] = mean_se(per_run, episodes * mask.sum())
+    motion = read_json(folder, robustness.MOTION_FILE)
+    if motion is not None:
+        per_run = np.asarray(motion["success_final_per_run"])
+        for i, speed in enumerate(motion["speeds"]):
+            rows[f"moving at {speed:g} m/s"] = mean_se(per_run[:, i], motion["episodes"])
+    partner = read_json(folder, robustness.PARTNER_FILE)
+    if partner is not None:
+        per_run = np.asarray(partner["success_final_per_run"])
+        for i, name in enumerate(partner["conditions"]):
+            label = "static target" if name == "static" else f"{name} partner"
+            rows[label] = mean_se(per_run[:, i], partner["episodes"])
+    sensing = read_json(folder, robustness.SENSING_FILE)
+    if sensing is not None:
+        noise = np.asarray(sensing["noise_success_final_per_run"])
+        for i, mm in enumerate(sensing["noise_mm"]):
+            if mm > 0:
+                rows[f"sensing error {mm:g} mm"] = mean_se(noise[:, i], sensing["episodes"])
+        delay = np.asarray(sensing["delay_success_final_per_run"])
+        for i, steps in enumerate(sensing["delays"]):
+            if steps > 0:
+                rows[f"action delay {steps} step(s)"] = mean_se(delay[:, i], sensing["episodes"])
+    natural = read_json(folder, "naturalness")
+    if natural is not None:
+        for metric in ("dtw", "jerk"):
+            values = np.asarray([p[metric] for p in natural["policies"]], np.float64)
+            se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
+            rows[f"naturalness: {metric}"] = (float(values.mean()), se)
+    return rows
+
+
+def side_by_side(setups: dict[str, Path]) -> dict:
+    """{'task', 'setups', 'rows': [{'condition', label: [mean, se] or None, ...}]} over
+    every condition any setup has, in first-seen order; all setups of one task."""
+    tasks = {
+        label: read_json(folder, robustness.ORIENTATION_FILE)["task"]
+        for label, folder in setups.items()
+    }
+    if len(set(tasks.values())) > 1:
+        raise ValueError(f"the setups are of different tasks: {tasks}")
+    per_setup = {label: setup_rows(folder) for label, folder in setups.items()}
+    conditions = list(dict.fromkeys(c for rows in per_setup.values() for c in rows))
+    rows = [
+        {"condition": c} | {label: per_setup[label].get(c) for label in setups} for c in conditions
+    ]
+    return {
+        "task": next(iter(tasks.values())),
+        "setups": {k: str(v) for k, v in setups.items()},
+        "rows": rows,
+    }
+
+
+def markdown(report: dict) -> str:
+    labels = list(report["setups"])
+    lines = [
+        f"| {report['task']}: condition | " + " | ".join(labels) + " |",
+        "|---|" + "---:|" * len(labels),
+    ]
+    for row in report["rows"]:
+        natural = row["condition"].startswith("naturalness")
+        cells = []
+        for label in labels:
+            value = row[label]
+            if value is None:
+                cells.append("")
+            else:
+                digits = ".4g" if natural else ".2f"
+                cells.append(f"{value[0]:{digits}} ± {value[1]:{digits}}")
+        lines.append(f"| {row['condition']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_heatmaps(setups: dict[str, Path], path: Path) -> None:
+    """Success at the end over yaw x pitch, one heatmap per setup on one colour scale."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        1, len(setups), figsize=(5.2 * len(setups), 4.6), constrained_layout=True, squeeze=False
+    )
+    for ax, (label, folder) in zip(axes[0], setups.items()):
+        summary = read_json(folder, robustness.ORIENTATION_FILE)
+        angles = np.asarray(summary["angles_deg"])
+        grid = np.asarray(summary["success_final"])
+        image = ax.imshow(grid, origin="lower", vmin=0, vmax=1, cmap="viridis")
+        ticks = np.arange(len(angles))
+        ax.set_xticks(ticks, [f"{a:g}" for a in angles])
+        ax.set_yticks(ticks, [f"{a:g}" for a in angles])
+        ax.set_xlabel("yaw, degrees")
+        ax.set_ylabel("pitch, degrees")
+        for (i, j), value in np.ndenumerate(grid):
+            ax.text(j, i, f"{value:.2f}", ha="center", va="center", fontsize=7,
+                    color="black" if value > 0.6 else "white")  # fmt: skip
+        ax.set_title(f"{label} ({summary['runs']} run(s), {summary['episodes']} episodes a cell)")
+    fig.colorbar(image, ax=axes[0].tolist(), label="success at the end")
+    fig.suptitle(f"{summary['task']}: success at the end against the target's orientation")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = tyro.cli(ReportArgs, args=sys.argv[1:] if argv is None else argv, description=__doc__)
+    try:
+        setups = parse_setups(args.setups)
+        report = side_by_side(setups)
+    except (ValueError, KeyError, json.JSONDecodeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "side_by_side.json").write_text(json.dumps(report, indent=1))
+    text = markdown(report)
+    (out / "side_by_side.md").write_text(text)
+    plot_heatmaps(setups, out / "orientation_side_by_side.png")
+    print(text, end="")
+    print(f"{out / 'side_by_side.md'}, .json, orientation_side_by_side.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
