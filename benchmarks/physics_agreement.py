@@ -53,6 +53,7 @@ SETTINGS = {
         "max_geom_pairs": 48,
         "max_contact_points": 64,
     },
+    "touching": {"force_margin": 0.0},  # contacts push from touching on, not from 2 mm
 }
 """Scene settings (``SceneConfig`` fields over the scene's own) of ``--settings``."""
 

@@ -185,7 +185,7 @@ class MjxPhysics:
         hits = one_hot * touching[:, None]
         # MJX runs no sensor stage. MuJoCo's touch sensor adds a contact's normal force
         # when the ray from the contact point along the normal meets the site's box; its
-        # soft contacts push from within their margin (contact_distance natively), so
+        # soft contacts push from within their margin (the scene's force_margin), so
         # here a contact within contact_distance whose ray meets the box reads as touch
         # (tests/test_profiles.py measures the agreement; penetration alone missed half).
         site = jnp.maximum(sensor, 0)
@@ -279,15 +279,14 @@ def sensor_readings(state: NativeState, contact_distance: float) -> Readings:
 
 
 def native_model(mj_model: mujoco.MjModel, contact_distance: float) -> mujoco.MjModel:
-    """The model native MuJoCo steps: ``mj_model`` with its contact pairs reported from
-    ``contact_distance`` apart (native MuJoCo only reports pairs within their margin; a
-    gap of the same size keeps forces from acting before the geoms touch, as with no
-    margin) and automatic reset off (a diverged simulation shows as NaN, which ends that
-    episode, not as a silent reset to the initial pose). An exported policy's player
-    loads this model."""
+    """The model native MuJoCo steps: ``mj_model`` with its contact pairs listed from
+    ``contact_distance`` apart and automatic reset off (a diverged simulation shows as
+    NaN, which ends that episode, not as a silent reset to the initial pose). MuJoCo
+    lists a pair's contacts closer than its margin plus its gap and lets those closer than
+    the margin push (``SceneConfig.force_margin``), so the gap widens the listing and the
+    forces stay as the scene has them. An exported policy's player loads this model."""
     m = copy.copy(mj_model)
-    m.pair_margin[:] = contact_distance
-    m.pair_gap[:] = contact_distance
+    m.pair_gap[:] = np.maximum(contact_distance - m.pair_margin, 0.0)
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     return m
 

@@ -31,9 +31,10 @@ contacts inside a box site on the palmar side of each phalanx: the authors' sens
 ``TOUCH_SITES``).
 A phalanx touches the target when its geom is closer than the environment's
 ``contact_distance``: MJX lists every candidate pair with its distance, native MuJoCo
-only pairs within their margin, so ``physics.NativePhysics`` gives its copy of the
-model pair margins and gaps of that distance (contacts reported from there, forces
-still from 0).
+only pairs closer than their margin plus gap, so ``physics.native_model`` widens its
+copy's gaps to list contacts from that distance. Agent-target contacts push from
+``SceneConfig.force_margin`` apart (the pairs' margin; MuJoCo 3.17 and MJX let contacts
+closer than the margin push, and the gap only widens what is listed).
 """
 
 from __future__ import annotations
@@ -83,6 +84,12 @@ class SceneConfig:
     """Contact dimensionality of agent-target pairs (3: sliding friction)."""
     friction: float = 1.0
     """Sliding friction coefficient of agent-target contacts."""
+    force_margin: float = 0.002
+    """Distance (metres) from which agent-target contacts push (the pairs' margin): 2 mm,
+    the physics every committed result trained with. MJX's JAX implementation ignores it
+    for capsule-box pairs (it pushes there only on penetration) and then parts from
+    native MuJoCo in contact by ~2e-2 rad per 40 ms period; at 0 (push from touching on)
+    the three physics agree, MJX to ~7e-6 rad (``benchmarks/results/physics_agreement.md``)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -245,6 +252,7 @@ def _add_pairs(world: mujoco.MjSpec, cfg: SceneConfig) -> None:
                 geomname2=t.name,
                 condim=cfg.condim,
                 friction=[cfg.friction, cfg.friction, 0.005, 0.0001, 0.0001],
+                margin=cfg.force_margin,
             )
 
 
