@@ -211,6 +211,12 @@ STATIC_PARTNER = {
 actions applied at once."""
 
 
+def partner_models(config: EnvConfig) -> dict[str, object]:
+    """The partner models ``config`` trains or scores against (the fields of
+    :data:`STATIC_PARTNER`)."""
+    return {name: getattr(config, name) for name in STATIC_PARTNER}
+
+
 def static_partner(config: EnvConfig) -> EnvConfig:
     """``config`` with :data:`STATIC_PARTNER`: the conditions in which every policy of a
     task is scored alike, whatever partner models it trained against (evaluation sweeps

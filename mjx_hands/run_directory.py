@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from mjx_hands import checkpoint, cluster, train_config
+from mjx_hands.env_config import partner_models
 
 BEST_DIR = "best"  # run_dir/best: the learner of the best evaluation, for evaluate --best
 
@@ -173,10 +174,18 @@ class RunDirectory:
             )
         # The checkpoint's own setting says whether it holds the replay buffer.
         saved_replay = meta["config"]["save_replay"]
+        layout = algo.checkpoint_tree(like, saved_replay, index)
+        # Other partner models (a curriculum's next stage) keep learner and replay; the
+        # episodes in flight, whose state has the old models' layout, start afresh.
+        saved_env = train_config.config_from_json(meta["config"]).env
+        new_partner = partner_models(saved_env) != partner_models(self.config.env)
+        if new_partner:
+            layout = {k: v for k, v in layout.items() if k != "env_state"}
         tree, _ = checkpoint.restore(
             self.checkpoints,
-            algo.checkpoint_tree(like, saved_replay, index),
+            layout,
             epoch,
+            partial=new_partner,
             verified=True,  # checked by read_metadata above or by latest_epoch
         )
         return tree

@@ -49,6 +49,9 @@ def default_config(argv: list[str]):
             config = train_config.config_from_json(saved)
         except TypeError as err:  # a key this version does not know
             raise ValueError(f"{run_dir}/config.json does not fit this version: {err}") from err
+        partners = option(argv, "--partners")
+        if partners is not None:  # a curriculum's next stage: the named partner models
+            config = train_config.with_partner_setup(config, partners)
         return dataclasses.replace(config, resume=False)
     return preset_default(argv)
 

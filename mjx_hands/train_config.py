@@ -17,7 +17,13 @@ import tyro
 from mjx_hands import checkpoint, learners, profiles, reward_params, tasks
 from mjx_hands.agents.ddpg import DDPGConfig
 from mjx_hands.brax_agents import PPOConfig, SACConfig
-from mjx_hands.env_config import PARTNER_SETUPS, EnvConfig, reward_weights, with_partners
+from mjx_hands.env_config import (
+    PARTNER_SETUPS,
+    EnvConfig,
+    reward_weights,
+    static_partner,
+    with_partners,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,6 +196,14 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
     base = dataclasses.replace(base, ddpg=learner_config(algo, base.ddpg))
     config = dataclasses.replace(base, **overrides)
     return dataclasses.replace(config, env=with_partners(config.env, config.partners))
+
+
+def with_partner_setup(config: TrainConfig, setup: str) -> TrainConfig:
+    """``config`` training against the partner models of ``setup`` from now on (a resumed
+    run's next curriculum stage): 'robust' sets ``env_config.ROBUST_PARTNERS``, 'static'
+    the paper's static partner (``env_config.static_partner``)."""
+    env = static_partner(config.env) if setup == "static" else with_partners(config.env, setup)
+    return dataclasses.replace(config, partners=setup, env=env)
 
 
 def learner_config(algo: str, ddpg: DDPGConfig) -> DDPGConfig:

@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from tiny import HAND_GROUP, hand_cli_args
 
 from mjx_hands import env as env_lib
 from mjx_hands import spatial, train_config
@@ -419,3 +420,32 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
     # One scoring environment for both, so every policy of a program shares its compiles.
     assert env_lib.scoring_env(robust) is env_lib.scoring_env(nominal)
     assert env_lib.scoring_env(robust).config == nominal
+
+
+@HAND_GROUP
+def test_a_curriculum_stage_resumes_a_run_against_the_robust_partners(tmp_path, capsys):
+    """``--resume --partners robust``: the next stage of a curriculum. The learner, its
+    replay and counters come from the checkpoint; the episodes in flight (whose state has
+    the static partner's layout) start afresh against the recorded, turning, moving
+    partner, which config.json then records. Without the flag the partner stays."""
+    from mjx_hands import env_config, train_cli
+
+    run = tmp_path / "run"
+    assert train_cli.main([*hand_cli_args(), "--epochs", "1", "--run-dir", str(run)]) == 0
+    assert json.loads((run / "config.json").read_text())["env"]["partner"] == "static"
+    capsys.readouterr()
+    argv = ["--run-dir", str(run), "--resume", "--partners", "robust", "--epochs", "2"]
+    assert train_cli.main(argv) == 0
+    assert "resumed from epoch 1" in capsys.readouterr().out
+    config = json.loads((run / "config.json").read_text())
+    assert config["partners"] == "robust"
+    for name, value in env_config.ROBUST_PARTNERS.items():
+        assert config["env"][name] == (list(value) if isinstance(value, tuple) else value), name
+    rows = (run / "metrics.csv").read_text().splitlines()
+    steps = [float(r.split(",")[rows[0].split(",").index("train/env_steps")]) for r in rows[1:]]
+    assert steps[-1] == 2 * steps[0]  # the counters went on: the checkpoint was restored
+    # And back to the static partner for a last stage.
+    argv = ["--run-dir", str(run), "--resume", "--partners", "static", "--epochs", "3"]
+    assert train_cli.main(argv) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["env"]["partner"] == "static" and config["env"]["target_speed_range"] is None

@@ -359,7 +359,8 @@ class DDPG:
         self, trees: list[dict[str, Any]], fresh: TrainerState
     ) -> TrainerState:
         """The population state of one :meth:`checkpoint_tree` per member; what a tree
-        lacks (a buffer not saved) comes from ``fresh``."""
+        lacks (a buffer not saved; the episodes in flight when the partner models
+        changed) comes from ``fresh``."""
         n = len(self.population.local_rows)
         members = []
         for index, tree in enumerate(trees):
@@ -370,7 +371,7 @@ class DDPG:
                     learner=jax.tree.map(
                         lambda x: np.broadcast_to(x, (n,) + x.shape), tree["learner"]
                     ),
-                    env_state=mine["env_state"],
+                    env_state=mine.get("env_state", fresh_member.env_state),
                     stats=mine["stats"],
                     rng=mine["rng"],
                     env_steps=mine["env_steps"],
