@@ -3,8 +3,9 @@
     python -m benchmarks.regenerate            # rewrite the tables in place
     python -m benchmarks.regenerate --check    # exit 1 naming each table that differs
 
-``REPORTS`` lists each table's folder and the ``mjx_hands.experiments`` command (``report``
-or ``compare``) that writes it from archived grids (``experiments archive``). ``--check``
+``REPORTS`` lists each table's folder and the command that writes it from its records:
+``mjx_hands.experiments`` ``report`` or ``compare`` from archived grids (``experiments
+archive``), ``mjx_hands.partner_report`` from archived robustness sweeps. ``--check``
 regenerates into a temporary folder and compares the text files (``.md``, ``.csv``,
 ``.json``) with the committed ones; ``tests/test_benchmarks.py`` runs it in CI, so a
 table edited by hand, or records changed without their table, fail the suite. Paths are
@@ -56,10 +57,17 @@ REPORTS: dict[str, list[str]] = {
         "no_imitation",
     ],
     "benchmarks/paper": ["report", "benchmarks/paper/*/*/seed*"],
+    "benchmarks/partners/et_pilot": [
+        "partner_report",
+        "static=benchmarks/partners/et_pilot/static",
+        "robust=benchmarks/partners/et_pilot/robust",
+        "static-then-robust=benchmarks/partners/et_pilot/static_then_robust",
+    ],
 }
-"""Table folder -> the experiments command that writes it (``--out`` added); an argument
-with ``*`` stands for the record folders it matches (sorted), as a shell would expand it;
-a table whose records are not there yet is skipped."""
+"""Table folder -> the command that writes it (``--out`` added): ``mjx_hands.experiments``
+(``report``, ``compare``) or ``mjx_hands.partner_report`` (``partner_report``); an
+argument with ``*`` stands for the record folders it matches (sorted), as a shell would
+expand it; a table whose records are not there yet is skipped."""
 
 TEXT_SUFFIXES = (".md", ".csv", ".json")
 
@@ -75,20 +83,23 @@ def expand(command: list[str]) -> list[str]:
 def regenerate(folder: str, out: Path) -> None:
     """Write ``folder``'s table into ``out`` from its records (quietly); ValueError when
     the command fails."""
-    from mjx_hands import experiments
+    from mjx_hands import experiments, partner_report
 
     command = expand(REPORTS[folder]) + ["--out", str(out)]
+    program, args = (
+        (partner_report, command[1:])
+        if command[0] == "partner_report"
+        else (experiments, command)
+    )
     printed = io.StringIO()
     with (
         contextlib.chdir(ROOT),
         contextlib.redirect_stdout(printed),
         contextlib.redirect_stderr(printed),
     ):
-        code = experiments.main(command)
+        code = program.main(args)
     if code:
-        raise ValueError(
-            f"{folder}: `experiments {' '.join(command)}` failed: {printed.getvalue()}"
-        )
+        raise ValueError(f"{folder}: `{' '.join(command)}` failed: {printed.getvalue()}")
 
 
 def differences(folder: str) -> list[str]:
