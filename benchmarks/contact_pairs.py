@@ -3,8 +3,8 @@ states of contact-rich native episodes.
 
     python -m benchmarks.contact_pairs --episodes 4 --replay \
         --out benchmarks/physics_agreement/handshake_contacts.json
-    python -m benchmarks.contact_pairs --episodes 4 --replay --contact-distance 0 \
-        --out benchmarks/physics_agreement/handshake_contacts_distance0.json
+    python -m benchmarks.contact_pairs --episodes 4 --replay --force-margin 0 \
+        --out benchmarks/physics_agreement/handshake_contacts_touching.json
 
 The starts of the transitions ``benchmarks.physics_agreement`` replays (the closing
 demonstration follower on native physics: joint positions and the target hand's mocap
@@ -21,9 +21,9 @@ geom pairs whose number of contact points differs, and the distribution of the m
 contacts' differences in distance (m), point (m), normal (degrees) and includemargin.
 
 ``--replay`` replays every period on MJX's JAX implementation as ``physics_agreement``
-does and reports the joint-angle differences from native; with ``--contact-distance 0``
-the native episodes and both models have pair margins and gaps of 0 (contacts push from
-touching on, in every pair type, natively and in MJX).
+does and reports the joint-angle differences from native; with ``--force-margin 0`` the
+scene's contacts push from touching on (``SceneConfig.force_margin``), in the native
+episodes and in both models, and contacts are still listed from ``contact_distance``.
 """
 
 from __future__ import annotations
@@ -256,10 +256,10 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
     parser.add_argument(
-        "--contact-distance",
+        "--force-margin",
         type=float,
-        default=EnvConfig.contact_distance,
-        help="the environment's contact_distance: native pair margins and gaps (m)",
+        default=scene.SceneConfig.force_margin,
+        help="the scene's force margin: distance (m) from which contacts push",
     )
     parser.add_argument("--replay", action="store_true", help="also replay every period on MJX")
     parser.add_argument("--out", type=Path, default=None)
@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     config = EnvConfig(
         task=args.task, mocap_source=args.mocap_source, physics="native",
-        scene=scene.SceneConfig(), contact_distance=args.contact_distance,
+        scene=scene.SceneConfig(force_margin=args.force_margin),
     )  # fmt: skip
     env = env_lib.HandInteractionEnv(config)
     print(f"native: {args.episodes} follower episodes ...", flush=True)
@@ -283,7 +283,8 @@ def main(argv: list[str] | None = None) -> dict:
         "close": args.close,
         "seed": args.seed,
         "mocap_source": args.mocap_source,
-        "contact_distance": args.contact_distance,
+        "contact_distance": env.config.contact_distance,
+        "force_margin": args.force_margin,
         "pair_margin": float(model.pair_margin.max()),
         "pair_gap": float(model.pair_gap.max()),
         "states": len(t["qpos"]),
