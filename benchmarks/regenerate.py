@@ -63,6 +63,11 @@ REPORTS: dict[str, list[str]] = {
         "robust=benchmarks/partners/et_pilot/robust",
         "static-then-robust=benchmarks/partners/et_pilot/static_then_robust",
     ],
+    "benchmarks/partners/clap_pilot": [
+        "partner_report",
+        "static=benchmarks/partners/clap_pilot/static",
+        "static-then-robust=benchmarks/partners/clap_pilot/static_then_robust",
+    ],
 }
 """Table folder -> the command that writes it (``--out`` added): ``mjx_hands.experiments``
 (``report``, ``compare``) or ``mjx_hands.partner_report`` (``partner_report``); an
