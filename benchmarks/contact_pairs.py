@@ -42,10 +42,14 @@ import numpy as np
 from mujoco import mjx
 
 from benchmarks import machine
-from benchmarks.physics_agreement import jax_periods, native_transitions, summary
-from mjx_hands import env as env_lib
+from benchmarks.physics_agreement import (
+    add_follower_arguments,
+    follower_env,
+    jax_periods,
+    native_transitions,
+    summary,
+)
 from mjx_hands import physics, scene
-from mjx_hands.env_config import EnvConfig
 
 # A contact list is a dict of arrays: geom (n, 2) ids, dist (n,) m, pos (n, 3) m,
 # normal (n, 3) unit, from geom[:, 0] towards geom[:, 1], includemargin (n,) m.
@@ -79,14 +83,13 @@ def mjx_contacts(
     :func:`native_contacts` (float32): of its fixed (ncon,) candidates per state, those
     closer than their pair's margin plus gap (where native MuJoCo lists them). ``caps``:
     the model's ``max_geom_pairs`` / ``max_contact_points``; False: none."""
-    quiet = copy.copy(model)
-    quiet.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR  # collisions only
+    uncapped = copy.copy(model)
     if not caps:
         for name in ("max_geom_pairs", "max_contact_points"):
-            i = mujoco.mj_name2id(quiet, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+            i = mujoco.mj_name2id(uncapped, mujoco.mjtObj.mjOBJ_NUMERIC, name)
             if i >= 0:
-                quiet.numeric_data[quiet.numeric_adr[i]] = -1
-    mx = mjx.put_model(quiet)
+                uncapped.numeric_data[uncapped.numeric_adr[i]] = -1
+    mx = physics.put_model(uncapped)  # the training physics' MJX model: collisions, no sensors
     template = mjx.make_data(mx)
 
     @jax.jit
@@ -250,11 +253,7 @@ def replay(env, model: mujoco.MjModel, t: dict[str, np.ndarray]) -> dict:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
-    parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--close", type=float, default=0.5, help="finger closing, action units")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
+    add_follower_arguments(parser, episodes=4)
     parser.add_argument(
         "--force-margin",
         type=float,
@@ -265,11 +264,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
 
-    config = EnvConfig(
-        task=args.task, mocap_source=args.mocap_source, physics="native",
-        scene=scene.SceneConfig(force_margin=args.force_margin),
-    )  # fmt: skip
-    env = env_lib.HandInteractionEnv(config)
+    env = follower_env(args, scene.SceneConfig(force_margin=args.force_margin))
     print(f"native: {args.episodes} follower episodes ...", flush=True)
     t = native_transitions(env, args.episodes, args.close, args.seed)
     model = physics.native_model(env.mj_model, env.config.contact_distance)

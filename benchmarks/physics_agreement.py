@@ -58,6 +58,24 @@ SETTINGS = {
 """Scene settings (``SceneConfig`` fields over the scene's own) of ``--settings``."""
 
 
+def add_follower_arguments(parser: argparse.ArgumentParser, episodes: int) -> None:
+    """The options of the native follower episodes (task, episodes, closing, seed, data)."""
+    parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
+    parser.add_argument("--episodes", type=int, default=episodes)
+    parser.add_argument("--close", type=float, default=0.5, help="finger closing, action units")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
+
+
+def follower_env(args, scene_config: scene.SceneConfig):
+    """The native environment the follower episodes of ``args`` run in."""
+    return env_lib.HandInteractionEnv(
+        EnvConfig(
+            task=args.task, mocap_source=args.mocap_source, physics="native", scene=scene_config
+        )
+    )
+
+
 def native_transitions(env, episodes: int, close: float, seed: int) -> dict[str, np.ndarray]:
     """(N, ...) arrays of every transition of ``episodes`` follower episodes on native
     physics: the state before (qpos, qvel, time), the period's set-points and mocap
@@ -147,12 +165,8 @@ def summary(diff: np.ndarray) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="handshake", choices=env_lib.TASKS)
+    add_follower_arguments(parser, episodes=8)
     parser.add_argument("--impls", nargs="+", default=["jax", "warp"], choices=["jax", "warp"])
-    parser.add_argument("--episodes", type=int, default=8)
-    parser.add_argument("--close", type=float, default=0.5, help="finger closing, action units")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--mocap-source", default="synthetic", choices=["optitrack", "synthetic"])
     parser.add_argument(
         "--warp-contacts-per-world",
         type=int,
@@ -195,12 +209,7 @@ def main(argv: list[str] | None = None) -> dict:
 def agreement(args, overrides: dict, impls: list[str]) -> dict:
     """Native follower episodes of the scene with ``overrides``, replayed period by period
     on each MJX implementation of ``impls``."""
-    scene_config = dataclasses.replace(scene.SceneConfig(), **overrides)
-    env = env_lib.HandInteractionEnv(
-        EnvConfig(
-            task=args.task, mocap_source=args.mocap_source, physics="native", scene=scene_config
-        )
-    )
+    env = follower_env(args, dataclasses.replace(scene.SceneConfig(), **overrides))
     print(f"native {overrides or 'scene'}: {args.episodes} follower episodes ...", flush=True)
     t = native_transitions(env, args.episodes, args.close, args.seed)
     model = physics.native_model(env.mj_model, env.config.contact_distance)

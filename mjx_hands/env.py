@@ -965,11 +965,13 @@ def scoring_env(config: EnvConfig) -> HandInteractionEnv:
     static- and robust-trained alike: ``config`` with the paper's static partner
     (``env_config.static_partner``); one object per resulting setting, so that every
     policy of a program shares its compiled rollouts."""
-    return _env_of(static_partner(config))
+    return env_for(static_partner(config))
 
 
-@functools.lru_cache(maxsize=4)
-def _env_of(config: EnvConfig) -> HandInteractionEnv:
+@functools.lru_cache(maxsize=32)
+def env_for(config: EnvConfig) -> HandInteractionEnv:
+    """One environment object per config in a program, so that everything cached per
+    environment (compiled rollouts and resets) is shared by every policy scored in it."""
     return HandInteractionEnv(config)
 
 

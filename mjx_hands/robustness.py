@@ -201,7 +201,6 @@ def sweep_reset(env, moving: bool):
     return jax.vmap(lambda key, tilt, speed: env.reset_with(key, tilt))
 
 
-@functools.lru_cache(maxsize=4)
 def moving_target_env(env, turn_period: float, motion_box: tuple[float, float, float]):
     """``env`` with a target that moves (its speed is data of each reset), one object per
     setting (see :func:`sweep_reset`)."""
@@ -211,7 +210,7 @@ def moving_target_env(env, turn_period: float, motion_box: tuple[float, float, f
         target_turn_period=turn_period,
         target_motion_box=motion_box,
     )
-    return env_lib.HandInteractionEnv(config)
+    return env_lib.env_for(config)
 
 
 def orientation_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
@@ -239,14 +238,13 @@ def motion_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     return {k: v.mean(axis=1) for k, v in result.items()}
 
 
-@functools.lru_cache(maxsize=16)
 def imperfect_env(env, noise: float, delay: int):
     """``env`` observing the target with a ``noise`` (m) error and acting ``delay`` steps
     late, one object per setting (so every policy of a program shares its compile)."""
     if (noise, delay) == (env.config.target_position_noise, env.config.action_delay):
         return env
     config = dataclasses.replace(env.config, target_position_noise=noise, action_delay=delay)
-    return env_lib.HandInteractionEnv(config)
+    return env_lib.env_for(config)
 
 
 def sensing_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
@@ -271,13 +269,12 @@ def sensing_sweep(env, policy, args: RobustnessArgs, log=None) -> dict:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-@functools.lru_cache(maxsize=8)
 def partner_env(env, partner: str, share: float):
     """``env`` with the ``partner`` model at ``share``, one object per setting."""
     if (partner, share) == (env.config.partner, env.config.partner_share):
         return env
     config = dataclasses.replace(env.config, partner=partner, partner_share=share)
-    return env_lib.HandInteractionEnv(config)
+    return env_lib.env_for(config)
 
 
 def partner_conditions(env, args: RobustnessArgs) -> list[tuple[str, float]]:
