@@ -188,13 +188,13 @@ turned per episode, carried along at a random speed, observed with 2 mm noise.""
 
 
 def with_partners(config: EnvConfig, setup: str) -> EnvConfig:
-    """``config`` with the partner models of ``setup`` (``PARTNER_SETUPS``): 'static'
-    leaves it as it is, 'robust' sets :data:`ROBUST_PARTNERS`."""
+    """``config`` against the partner models of ``setup`` (``PARTNER_SETUPS``), every
+    partner field set: 'static' the paper's static partner (:func:`static_partner`),
+    'robust' :data:`ROBUST_PARTNERS` over it. Flags parsed afterwards override fields."""
     if setup not in PARTNER_SETUPS:
         raise ValueError(f"unknown partners {setup!r}; expected one of {', '.join(PARTNER_SETUPS)}")
-    if setup == "static":
-        return config
-    return dataclasses.replace(config, **ROBUST_PARTNERS)
+    static = static_partner(config)
+    return static if setup == "static" else dataclasses.replace(static, **ROBUST_PARTNERS)
 
 
 STATIC_PARTNER = {

@@ -83,8 +83,9 @@ def read_json(folder: Path, name: str) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def setup_rows(folder: Path) -> dict[str, tuple[float, float]]:
-    """{condition: (mean, se)} of one setup, success at the end and naturalness."""
+def setup_rows(folder: Path) -> dict[str, tuple[float, float | None]]:
+    """{condition: (mean, se)} of one setup, success at the end and naturalness (se None
+    for one policy's naturalness)."""
     rows: dict[str, tuple[float, float]] = {}
     orientation = read_json(folder, robustness.ORIENTATION_FILE)
     angles = np.asarray(orientation["angles_deg"])
@@ -122,7 +123,8 @@ def setup_rows(folder: Path) -> dict[str, tuple[float, float]]:
     if natural is not None:
         for metric in ("dtw", "jerk"):
             values = np.asarray([p[metric] for p in natural["policies"]], np.float64)
-            se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
+            # One policy has no spread to report (None), not a standard error of 0.
+            se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else None
             rows[f"naturalness: {metric}"] = (float(values.mean()), se)
     return rows
 
@@ -163,7 +165,8 @@ def markdown(report: dict) -> str:
                 cells.append("")
             else:
                 digits = ".4g" if natural else ".2f"
-                cells.append(f"{value[0]:{digits}} ± {value[1]:{digits}}")
+                spread = "(n = 1)" if value[1] is None else f"± {value[1]:{digits}}"
+                cells.append(f"{value[0]:{digits}} {spread}")
         lines.append(f"| {row['condition']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

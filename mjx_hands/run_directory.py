@@ -176,7 +176,8 @@ class RunDirectory:
         saved_replay = meta["config"]["save_replay"]
         layout = algo.checkpoint_tree(like, saved_replay, index)
         # Other partner models (a curriculum's next stage) keep learner and replay; the
-        # episodes in flight, whose state has the old models' layout, start afresh.
+        # episodes in flight start afresh, also where their state's layout would fit: they
+        # were drawn against the old models, and the new stage's begin with it.
         saved_env = train_config.config_from_json(meta["config"]).env
         new_partner = partner_models(saved_env) != partner_models(self.config.env)
         if new_partner:

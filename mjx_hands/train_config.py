@@ -21,7 +21,6 @@ from mjx_hands.env_config import (
     PARTNER_SETUPS,
     EnvConfig,
     reward_weights,
-    static_partner,
     with_partners,
 )
 
@@ -202,8 +201,7 @@ def with_partner_setup(config: TrainConfig, setup: str) -> TrainConfig:
     """``config`` training against the partner models of ``setup`` from now on (a resumed
     run's next curriculum stage): 'robust' sets ``env_config.ROBUST_PARTNERS``, 'static'
     the paper's static partner (``env_config.static_partner``)."""
-    env = static_partner(config.env) if setup == "static" else with_partners(config.env, setup)
-    return dataclasses.replace(config, partners=setup, env=env)
+    return dataclasses.replace(config, partners=setup, env=with_partners(config.env, setup))
 
 
 def learner_config(algo: str, ddpg: DDPGConfig) -> DDPGConfig:

@@ -409,6 +409,9 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
     )
     assert robust != nominal
     assert env_config.static_partner(robust) == env_config.static_partner(nominal) == nominal
+    # 'static' names one thing everywhere: the static partner, whatever was set before.
+    assert env_config.with_partners(robust, "static") == nominal
+    assert env_config.with_partners(robust, "robust") == env_config.with_partners(nominal, "robust")
     # Every partner model the config documents is reset (a new one must be added there).
     documented = {
         f.name

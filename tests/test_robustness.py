@@ -184,7 +184,9 @@ def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_pat
     rng = np.random.default_rng(0)
     _, static = _write_sweeps(tmp_path / "static", rng, 1, 32, None)
     _, robust = _write_sweeps(tmp_path / "robust", rng, 3, 32, [0.1, 0.2, 0.4])
-    argv = ["static=" + str(tmp_path / "static"), "robust=" + str(tmp_path / "robust")]
+    _write_sweeps(tmp_path / "single", rng, 1, 32, [0.3])
+    argv = ["static=" + str(tmp_path / "static"), "robust=" + str(tmp_path / "robust"),
+            "single=" + str(tmp_path / "single")]
     assert partner_report.main([*argv, "--out", str(tmp_path / "out")]) == 0
     report = json.loads((tmp_path / "out" / "side_by_side.json").read_text())
     rows = {r["condition"]: r for r in report["rows"]}
@@ -210,8 +212,10 @@ def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_pat
     np.testing.assert_allclose(rows["action delay 1 step(s)"]["static"][0], delay)
     np.testing.assert_allclose(rows["naturalness: jerk"]["robust"][0], 2 * 0.7 / 3)
     assert rows["naturalness: dtw"]["static"] is None  # not measured for that setup
+    assert rows["naturalness: dtw"]["single"] == [0.3, None]  # one policy: no spread
     text = (tmp_path / "out" / "side_by_side.md").read_text()
-    assert text.splitlines()[0] == "| et: condition | static | robust |"
+    assert text.splitlines()[0] == "| et: condition | static | robust | single |"
+    assert "| naturalness: dtw |  | 0.2333 ± 0.08819 | 0.3 (n = 1) |" in text
     assert (tmp_path / "out" / "orientation_side_by_side.png").stat().st_size > 10_000
     # Bad input is named.
     assert partner_report.main(["static", "--out", str(tmp_path / "x")]) == 2
