@@ -421,3 +421,29 @@ def test_the_authors_demonstration_subsets_are_selected_by_row():
     assert env_lib.select_demos(synthetic, "handshake", "authors") == synthetic
     with pytest.raises(ValueError, match="unknown demonstration set"):
         env_lib.select_demos(synthetic, "handshake", "some")
+
+
+@pytest.mark.parametrize("site", ["palm_center", "robot0:S_fftip"])
+def test_the_ik_chain_places_its_site_where_mujoco_kinematics_does(site):
+    """The chain's forward kinematics (used by the start pose's IK, the demonstration
+    follower and the reachability benchmark) against MuJoCo's own, at random joint values
+    within the chain's limits (the finger's joints too, for a fingertip)."""
+    from mjx_hands import ik
+
+    model = env_lib.HandInteractionEnv(
+        env_lib.EnvConfig(task="et", mocap_source="synthetic", physics="native")
+    ).mj_model
+    chain = ik.make_chain(model, scene.AGENT + site)
+    site_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, scene.AGENT + site)
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(0)
+    forward = jax.jit(lambda q: ik.forward(chain, q))
+    for _ in range(5):
+        q = rng.uniform(chain.lower, chain.upper)
+        data.qpos[:] = 0.0
+        data.qpos[chain.qpos_adr] = q
+        mujoco.mj_kinematics(model, data)
+        with jax.default_matmul_precision("highest"):
+            pos, rot = map(np.asarray, forward(jnp.asarray(q, jnp.float32)))
+        np.testing.assert_allclose(pos, data.site_xpos[site_id], atol=2e-6)
+        np.testing.assert_allclose(rot, data.site_xmat[site_id].reshape(3, 3), atol=2e-6)
