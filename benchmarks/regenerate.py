@@ -59,20 +59,29 @@ REPORTS: dict[str, list[str]] = {
     "benchmarks/paper": ["report", "benchmarks/paper/*/*/seed*"],
     "benchmarks/partners/et_pilot": [
         "partner_report",
-        "static=benchmarks/partners/et_pilot/static",
+        "static=benchmarks/partners/et/seed0/static",
         "robust=benchmarks/partners/et_pilot/robust",
-        "static-then-robust=benchmarks/partners/et_pilot/static_then_robust",
+        "static-then-robust=benchmarks/partners/et/seed0/static_then_robust",
     ],
     "benchmarks/partners/clap_pilot": [
         "partner_report",
-        "static=benchmarks/partners/clap_pilot/static",
-        "static-then-robust=benchmarks/partners/clap_pilot/static_then_robust",
+        "static=benchmarks/partners/handclap/seed0/static",
+        "static-then-robust=benchmarks/partners/handclap/seed0/static_then_robust",
     ],
+    **{
+        f"benchmarks/partners/{task}": [
+            "partner_report",
+            f"static=benchmarks/partners/{task}/seed*/static",
+            f"static-then-robust=benchmarks/partners/{task}/seed*/static_then_robust",
+        ]
+        for task in ("et", "handclap", "handshake")
+    },
 }
 """Table folder -> the command that writes it (``--out`` added): ``mjx_hands.experiments``
 (``report``, ``compare``) or ``mjx_hands.partner_report`` (``partner_report``); an
 argument with ``*`` stands for the record folders it matches (sorted), as a shell would
-expand it; a table whose records are not there yet is skipped."""
+expand it, and ``LABEL=...*...`` for ``LABEL=`` and them joined by commas (a partner
+setup pooled over seeds); a table whose records are not there yet is skipped."""
 
 TEXT_SUFFIXES = (".md", ".csv", ".json")
 
@@ -81,7 +90,11 @@ def expand(command: list[str]) -> list[str]:
     """``command`` with every ``*`` argument replaced by the paths it matches under ROOT."""
     out = []
     for arg in command:
-        out += sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(arg)) if "*" in arg else [arg]
+        label, _, pattern = arg.rpartition("=")
+        matches = sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern)) if "*" in arg else [arg]
+        if label and "*" in arg:
+            matches = [f"{label}={','.join(matches)}"] if matches else []
+        out += matches
     return out
 
 

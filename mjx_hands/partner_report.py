@@ -4,7 +4,9 @@ next to each other.
     python -m mjx_hands.partner_report static=OUT_A robust=OUT_B --out DIR
 
 Each ``LABEL=FOLDER`` is the ``--out`` folder of ``mjx_hands.robustness --sweep all`` (and,
-where it was run there, of ``mjx_hands.naturalness``) over one setup's runs of one task.
+where it was run there, of ``mjx_hands.naturalness``) over one setup's runs of one task;
+``LABEL=FOLDER,FOLDER,...`` pools the runs of several such folders (e.g. one per seed,
+swept in different sessions on the same episodes).
 Every setup was scored on the same episodes against the same partner
 (``env.scoring_env``), so rows compare like with like. Writes ``side_by_side.md`` /
 ``.json`` and ``orientation_side_by_side.png`` into ``--out``.
@@ -43,21 +45,29 @@ class ReportArgs:
     """Folder for side_by_side.md / .json and orientation_side_by_side.png."""
 
 
-def parse_setups(specs: tuple[str, ...]) -> dict[str, Path]:
-    """{label: folder} from ``LABEL=FOLDER`` strings; ValueError naming a bad one."""
+Folders = tuple[Path, ...]
+"""One setup's sweep folders, whose runs are pooled."""
+
+SHARED_KEYS = ("task", "episodes", "seed", "angles_deg", "speeds", "conditions", "noise_mm", "delays")
+"""Keys that pooled folders must agree on (the same conditions, the same episodes)."""
+
+
+def parse_setups(specs: tuple[str, ...]) -> dict[str, Folders]:
+    """{label: folders} from ``LABEL=FOLDER[,FOLDER...]`` strings; ValueError naming a bad one."""
     setups = {}
     for spec in specs:
-        label, sep, folder = spec.partition("=")
-        if not sep or not label or not folder:
+        label, sep, folders = spec.partition("=")
+        if not sep or not label or not folders:
             raise ValueError(f"setup {spec!r}: expected LABEL=FOLDER (e.g. static=runs/a)")
         if label in setups:
             raise ValueError(f"setup label {label!r} given twice")
-        if not (Path(folder) / f"{robustness.ORIENTATION_FILE}.json").is_file():
-            raise ValueError(
-                f"setup {label!r}: {folder} holds no {robustness.ORIENTATION_FILE}.json "
-                "(run python -m mjx_hands.robustness RUNS --sweep all --out FOLDER first)"
-            )
-        setups[label] = Path(folder)
+        for folder in folders.split(","):
+            if not (Path(folder) / f"{robustness.ORIENTATION_FILE}.json").is_file():
+                raise ValueError(
+                    f"setup {label!r}: {folder} holds no {robustness.ORIENTATION_FILE}.json "
+                    "(run python -m mjx_hands.robustness RUNS --sweep all --out FOLDER first)"
+                )
+        setups[label] = tuple(Path(f) for f in folders.split(","))
     if not setups:
         raise ValueError("give at least one LABEL=FOLDER")
     return setups
@@ -78,12 +88,39 @@ def mean_se(per_run: np.ndarray, samples: int) -> tuple[float, float]:
     return mean, math.sqrt(mean * (1.0 - mean) / samples)
 
 
-def read_json(folder: Path, name: str) -> dict | None:
-    path = folder / f"{name}.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+def read_json(folders: Folders, name: str) -> dict | None:
+    """Sweep ``name`` of a setup: one folder's summary, or several folders' pooled (their
+    per-run arrays and naturalness policies concatenated, the means over all runs).
+    None where no folder has it; ValueError where only some do or they disagree."""
+    paths = [folder / f"{name}.json" for folder in folders]
+    found = [p for p in paths if p.is_file()]
+    if not found:
+        return None
+    if len(found) < len(paths):
+        missing = ", ".join(str(p) for p in paths if not p.is_file())
+        raise ValueError(f"{missing} missing: every pooled folder needs the same sweeps")
+    parts = [json.loads(p.read_text()) for p in found]
+    if len(parts) == 1:
+        return parts[0]
+    first = parts[0]
+    for path, part in zip(found[1:], parts[1:]):
+        differ = [k for k in SHARED_KEYS if part.get(k) != first.get(k)]
+        if differ:
+            raise ValueError(f"{path} differs from {found[0]} in {', '.join(differ)}: pool like sweeps")
+    pooled = dict(first)
+    if "policies" in first:  # naturalness
+        pooled["policies"] = [policy for part in parts for policy in part["policies"]]
+        return pooled
+    for key in (k for k in first if k.endswith("_per_run")):
+        runs = np.concatenate([np.asarray(part[key], np.float64) for part in parts])
+        pooled[key] = runs.tolist()
+        pooled[key.removesuffix("_per_run")] = runs.mean(axis=0).tolist()
+        pooled.pop(key.removesuffix("_per_run") + "_se", None)  # partners' rows compute their own
+    pooled["runs"] = sum(int(part["runs"]) for part in parts)
+    return pooled
 
 
-def setup_rows(folder: Path) -> dict[str, tuple[float, float | None]]:
+def setup_rows(folder: Folders) -> dict[str, tuple[float, float | None]]:
     """{condition: (mean, se)} of one setup, success at the end and naturalness (se None
     for one policy's naturalness)."""
     rows: dict[str, tuple[float, float]] = {}
@@ -129,7 +166,7 @@ def setup_rows(folder: Path) -> dict[str, tuple[float, float | None]]:
     return rows
 
 
-def side_by_side(setups: dict[str, Path]) -> dict:
+def side_by_side(setups: dict[str, Folders]) -> dict:
     """{'task', 'setups', 'rows': [{'condition', label: [mean, se] or None, ...}]} over
     every condition any setup has, in first-seen order; all setups of one task."""
     tasks = {
@@ -145,7 +182,7 @@ def side_by_side(setups: dict[str, Path]) -> dict:
     ]
     return {
         "task": next(iter(tasks.values())),
-        "setups": {k: str(v) for k, v in setups.items()},
+        "setups": {k: ",".join(str(f) for f in v) for k, v in setups.items()},
         "rows": rows,
     }
 
@@ -171,7 +208,7 @@ def markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_heatmaps(setups: dict[str, Path], path: Path) -> None:
+def plot_heatmaps(setups: dict[str, Folders], path: Path) -> None:
     """Success at the end over yaw x pitch, one heatmap per setup on one colour scale."""
     import matplotlib
 

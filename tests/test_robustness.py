@@ -217,6 +217,20 @@ def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_pat
     assert text.splitlines()[0] == "| et: condition | static | robust | single |"
     assert "| naturalness: dtw |  | 0.2333 ± 0.08819 | 0.3 (n = 1) |" in text
     assert (tmp_path / "out" / "orientation_side_by_side.png").stat().st_size > 10_000
+    # Folders pooled (seeds swept apart): the runs of both, as one setup of 4 runs.
+    pooled = "pooled=" + str(tmp_path / "robust") + "," + str(tmp_path / "single")
+    assert partner_report.main([pooled, "--out", str(tmp_path / "pool")]) == 0
+    rows = {r["condition"]: r for r in
+            json.loads((tmp_path / "pool" / "side_by_side.json").read_text())["rows"]}
+    single = json.loads((tmp_path / "single" / f"{robustness.MOTION_FILE}.json").read_text())
+    speeds = np.concatenate([robust[robustness.MOTION_FILE]["success_final"][:, 1],
+                             np.asarray(single["success_final_per_run"])[:, 1]])
+    np.testing.assert_allclose(
+        rows["moving at 0.2 m/s"]["pooled"], [speeds.mean(), speeds.std(ddof=1) / 2.0]
+    )
+    np.testing.assert_allclose(rows["naturalness: dtw"]["pooled"][0], (0.1 + 0.2 + 0.4 + 0.3) / 4)
+    (tmp_path / "single" / "naturalness.json").unlink()
+    assert partner_report.main([pooled, "--out", str(tmp_path / "pool")]) == 2  # only some
     # Bad input is named.
     assert partner_report.main(["static", "--out", str(tmp_path / "x")]) == 2
     assert partner_report.main(["a=" + str(tmp_path), "--out", str(tmp_path / "x")]) == 2
