@@ -14,7 +14,9 @@ their limits, position only, from the episode's start pose and from ``--restarts
 random poses. Reported per cell: the share of episodes whose best solution ends within
 ``--tolerance`` of the goal, and the median distance. A goal out of reach makes the
 cell's success depend on touching elsewhere; a reachable one says the arm's kinematics
-do not forbid it. Kinematics only: collisions between the hands are not checked.
+do not forbid it. Kinematics only: collisions between the hands are not checked, and the
+index finger's distal joint moves freely in the IK where the hand couples it to the middle
+one (one degree of freedom more than the hand has).
 """
 
 from __future__ import annotations
@@ -89,7 +91,7 @@ def reachability(task: str, mocap_source: str, max_angle: float, step: float, ep
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--task", default="et")
+    parser.add_argument("--task", default="et", choices=list(CONTACT_POINTS))
     parser.add_argument("--mocap-source", default="optitrack", choices=MOCAP_SOURCES)
     parser.add_argument("--max-angle-deg", type=float, default=60.0)
     parser.add_argument("--angle-step-deg", type=float, default=15.0)

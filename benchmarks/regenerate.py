@@ -87,7 +87,8 @@ TEXT_SUFFIXES = (".md", ".csv", ".json")
 
 
 def expand(command: list[str]) -> list[str]:
-    """``command`` with every ``*`` argument replaced by the paths it matches under ROOT."""
+    """``command`` with every ``*`` argument replaced by the paths it matches under ROOT
+    (``LABEL=pattern``: by ``LABEL=`` and the paths joined by commas, none when none match)."""
     out = []
     for arg in command:
         label, _, pattern = arg.rpartition("=")
@@ -162,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         if any("*" in a for a in REPORTS[folder]) and expand(REPORTS[folder]) == [
             a for a in REPORTS[folder] if "*" not in a
         ]:
-            print(f"{folder}: no records yet")  # a glob that matches nothing
+            print(f"{folder}: no records yet")  # no glob matches anything
             continue
         if args.check:
             diffs = differences(folder)

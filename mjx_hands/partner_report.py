@@ -15,7 +15,8 @@ Rows: success at the end at the nominal pose; averaged over the yaw x pitch cell
 +-30, +-45 and +-60 degrees; at each speed of the motion sweep; against the static target
 and the recorded partner; under sensing error and action delay; then the naturalness
 metrics (lower is closer to the demonstrations). Values are mean +- standard error over
-the setup's runs (one run: the binomial error over its episodes).
+the setup's runs (one run: the binomial error over its episodes; one policy's
+naturalness: "(n = 1)").
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ class ReportArgs:
     """Static-trained against robust-trained policies, side by side."""
 
     setups: tyro.conf.Positional[tuple[str, ...]]
-    """LABEL=FOLDER per setup: a folder written by ``robustness --sweep all --out``."""
+    """LABEL=FOLDER[,FOLDER...] per setup: folders written by ``robustness --sweep all
+    --out`` (several: their runs pooled)."""
     out: str = "partner_report"
     """Folder for side_by_side.md / .json and orientation_side_by_side.png."""
 
@@ -48,7 +50,10 @@ class ReportArgs:
 Folders = tuple[Path, ...]
 """One setup's sweep folders, whose runs are pooled."""
 
-SHARED_KEYS = ("task", "episodes", "seed", "angles_deg", "speeds", "conditions", "noise_mm", "delays")
+SHARED_KEYS = (
+    "task", "episodes", "seed", "angles_deg", "speeds", "turn_period", "motion_box",
+    "conditions", "partner_lag", "noise_mm", "delays",
+)
 """Keys that pooled folders must agree on (the same conditions, the same episodes)."""
 
 
@@ -58,10 +63,13 @@ def parse_setups(specs: tuple[str, ...]) -> dict[str, Folders]:
     for spec in specs:
         label, sep, folders = spec.partition("=")
         if not sep or not label or not folders:
-            raise ValueError(f"setup {spec!r}: expected LABEL=FOLDER (e.g. static=runs/a)")
+            raise ValueError(f"setup {spec!r}: expected LABEL=FOLDER[,FOLDER...] (e.g. static=runs/a)")
         if label in setups:
             raise ValueError(f"setup label {label!r} given twice")
-        for folder in folders.split(","):
+        names = folders.split(",")
+        if "" in names or len(set(names)) < len(names):
+            raise ValueError(f"setup {label!r}: {folders!r} has an empty or repeated folder")
+        for folder in names:
             if not (Path(folder) / f"{robustness.ORIENTATION_FILE}.json").is_file():
                 raise ValueError(
                     f"setup {label!r}: {folder} holds no {robustness.ORIENTATION_FILE}.json "
@@ -105,6 +113,8 @@ def read_json(folders: Folders, name: str) -> dict | None:
     first = parts[0]
     for path, part in zip(found[1:], parts[1:]):
         differ = [k for k in SHARED_KEYS if part.get(k) != first.get(k)]
+        if (part.get("checkpoint") or {}).get("kind") != (first.get("checkpoint") or {}).get("kind"):
+            differ.append("checkpoint kind")
         if differ:
             raise ValueError(f"{path} differs from {found[0]} in {', '.join(differ)}: pool like sweeps")
     pooled = dict(first)
@@ -117,6 +127,8 @@ def read_json(folders: Folders, name: str) -> dict | None:
         pooled[key.removesuffix("_per_run")] = runs.mean(axis=0).tolist()
         pooled.pop(key.removesuffix("_per_run") + "_se", None)  # partners' rows compute their own
     pooled["runs"] = sum(int(part["runs"]) for part in parts)
+    pooled["run_dirs"] = [d for part in parts for d in part.get("run_dirs", [])]
+    pooled.pop("checkpoint", None)  # per folder; its kind agrees (checked above)
     return pooled
 
 
@@ -168,7 +180,8 @@ def setup_rows(folder: Folders) -> dict[str, tuple[float, float | None]]:
 
 def side_by_side(setups: dict[str, Folders]) -> dict:
     """{'task', 'setups', 'rows': [{'condition', label: [mean, se] or None, ...}]} over
-    every condition any setup has, in first-seen order; all setups of one task."""
+    every condition any setup has, in first-seen order (se None for one policy's
+    naturalness); all setups of one task."""
     tasks = {
         label: read_json(folder, robustness.ORIENTATION_FILE)["task"]
         for label, folder in setups.items()

@@ -199,8 +199,9 @@ def preset(kind: str, **overrides: Any) -> TrainConfig:
 
 def with_partner_setup(config: TrainConfig, setup: str) -> TrainConfig:
     """``config`` training against the partner models of ``setup`` from now on (a resumed
-    run's next curriculum stage): 'robust' sets ``env_config.ROBUST_PARTNERS``, 'static'
-    the paper's static partner (``env_config.static_partner``)."""
+    run's next curriculum stage), every partner field set as ``env_config.with_partners``
+    sets it: 'static' the paper's static partner, 'robust' ``env_config.ROBUST_PARTNERS``
+    over it (a partner flag of the previous stage, e.g. ``--action-delay``, is reset)."""
     return dataclasses.replace(config, partners=setup, env=with_partners(config.env, setup))
 
 

@@ -17,41 +17,50 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
-task=$1
+task=${1:?usage: bash benchmarks/partners/seeds.sh TASK SEED...}
 shift
+[ $# -gt 0 ] || { echo "usage: bash benchmarks/partners/seeds.sh TASK SEED... (no seed given)" >&2; exit 2; }
 runs=${RUNS:-$root/runs/partners}
 mkdir -p "$runs"
 snap=$(mktemp -d "$root/../.mjx-hands-partners-code-XXXX")
+trap 'rm -rf "$snap"' EXIT
 git archive HEAD | tar -x -C "$snap"
 python=${PYTHON:-$root/.venv/bin/python}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
+
+one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error
+  local seed=$1 static=$runs/$name-static curriculum=$runs/$name-static_then_robust
+  rm -rf "$static" "$curriculum" "$runs/$name-sweeps" "$dest.tmp"
+  mkdir -p "$runs/$name-sweeps"
+  run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" \
+    --run-dir "$static" > "$static.log" 2>&1 || return 1
+  cp -r "$static" "$curriculum" || return 1
+  run train.py --run-dir "$curriculum" --resume --partners robust --epochs 100 \
+    > "$curriculum.log" 2>&1 || return 1
+  for setup in static static_then_robust; do
+    local out=$runs/$name-sweeps/$setup
+    run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
+      > "$out.log" 2>&1 || return 1
+    run -m mjx_hands.naturalness "$runs/$name-$setup" --episodes 64 --out "$out" \
+      >> "$out.log" 2>&1 || return 1
+    mkdir -p "$dest.tmp/$setup"
+    cp "$runs/$name-$setup"/{config.json,metrics.csv} "$out"/robustness_*.{json,png} \
+      "$out/naturalness.json" "$dest.tmp/$setup/" || return 1
+    cp "$runs/$name-$setup.log" "$dest.tmp/$setup/train.log" || return 1
+  done
+  # Paths relative to the checkout (text files only; none to rewrite is fine).
+  { grep -rlI "$root/" "$dest.tmp" || true; } | xargs -r sed -i "s#$root/##g"
+}
+
 for seed in "$@"; do
   name=$task-s$seed
   dest=$root/benchmarks/partners/$task/seed$seed
   if [ -e "$dest" ]; then echo "$name: $dest exists, skipped" >> "$runs/status"; continue; fi
-  static=$runs/$name-static curriculum=$runs/$name-static_then_robust
-  rm -rf "$static" "$curriculum" "$runs/$name-sweeps"
-  mkdir -p "$runs/$name-sweeps"
-  if run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" \
-        --run-dir "$static" > "$static.log" 2>&1 \
-     && cp -r "$static" "$curriculum" \
-     && run train.py --run-dir "$curriculum" --resume --partners robust --epochs 100 \
-        > "$curriculum.log" 2>&1; then
-    for setup in static static_then_robust; do
-      out=$runs/$name-sweeps/$setup
-      run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
-        > "$out.log" 2>&1
-      run -m mjx_hands.naturalness "$runs/$name-$setup" --episodes 64 --out "$out" \
-        >> "$out.log" 2>&1
-      mkdir -p "$dest/$setup"
-      cp "$runs/$name-$setup"/{config.json,metrics.csv} "$out"/robustness_*.{json,png} \
-        "$out/naturalness.json" "$dest/$setup/"
-      cp "$runs/$name-$setup.log" "$dest/$setup/train.log"
-    done
-    grep -rl "$root/" "$dest" | xargs -r sed -i "s#$root/##g"  # paths relative to the checkout
+  if one_seed "$seed"; then  # a seed is archived whole or not at all
+    mv "$dest.tmp" "$dest"
     echo "$name: done $(date -u +%FT%TZ), archived in $dest" >> "$runs/status"
   else
+    rm -rf "$dest.tmp"
     echo "$name: failed $(date -u +%FT%TZ), see $runs/$name-*.log" >> "$runs/status"
   fi
 done
-rm -rf "$snap"
