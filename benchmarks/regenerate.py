@@ -67,6 +67,7 @@ REPORTS: dict[str, list[str]] = {
         "partner_report",
         "static=benchmarks/partners/handclap/seed0/static",
         "static-then-robust=benchmarks/partners/handclap/seed0/static_then_robust",
+        "static-then-robust-160=benchmarks/partners/clap_pilot/static_then_robust_160",
     ],
     **{
         f"benchmarks/partners/{task}": [
