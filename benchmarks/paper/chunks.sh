@@ -37,7 +37,7 @@ for seed in "$@"; do
         > "$runs/$name.log" 2>&1; then
     (cd "$snap" && "$python" -m mjx_hands.experiments archive "$runs/$name" "$dest" \
         --log "$runs/$name.log")
-    grep -rl "$root/" "$dest" | xargs -r sed -i "s#$root/##g"  # paths relative to the checkout
+    { grep -rlI "$root/" "$dest" || true; } | xargs -r sed -i "s#$root/##g"  # paths relative to the checkout
     echo "$name: done $(date -u +%FT%TZ), archived in $dest" >> "$runs/status"
   else
     echo "$name: failed $(date -u +%FT%TZ), see $runs/$name.log" >> "$runs/status"
