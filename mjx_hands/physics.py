@@ -140,6 +140,47 @@ def touch_sites(m: mujoco.MjModel) -> np.ndarray:
     )
 
 
+def capsule_box_pairs(m: mujoco.MjModel, sensor_of_geom: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The contact pairs between a sensed capsule (a phalanx) and a box: capsule geoms
+    (P,), box geoms (P,) and the capsule's contact sensor (P,)."""
+    capsule, box = int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_BOX)
+    pairs = []
+    for g1, g2 in zip(m.pair_geom1, m.pair_geom2):
+        for a, b in ((g1, g2), (g2, g1)):
+            if m.geom_type[a] == capsule and m.geom_type[b] == box and sensor_of_geom[a] >= 0:
+                pairs.append((a, b, sensor_of_geom[a]))
+    return tuple(np.array(column, np.int32).reshape(-1) for column in zip(*pairs)) if pairs else (
+        np.zeros(0, np.int32),) * 3
+
+
+def segment_box_distance(
+    a: jax.Array, b: jax.Array, centre: jax.Array, rot: jax.Array, half: jax.Array,
+    iterations: int = 32,
+) -> jax.Array:
+    """Distance from segments ``a``-``b`` (..., 3) to boxes (centre (..., 3), rotation
+    (..., 3, 3) of the box frame in the world, half sizes (..., 3)); 0 where they meet.
+    The distance to a convex box along a segment is convex in the segment's parameter, so
+    a golden-section search finds its minimum (to 0.618^iterations of the length)."""
+
+    def to_box(t):
+        point = a + t[..., None] * (b - a)
+        local = jnp.einsum("...ji,...j->...i", rot, point - centre)
+        return jnp.linalg.norm(jnp.maximum(jnp.abs(local) - half, 0.0), axis=-1)
+
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    low, high = jnp.zeros(a.shape[:-1]), jnp.ones(a.shape[:-1])
+
+    def narrow(_, bounds):
+        low, high = bounds
+        left, right = high - ratio * (high - low), low + ratio * (high - low)
+        keep_left = to_box(left) <= to_box(right)
+        return jnp.where(keep_left, low, left), jnp.where(keep_left, right, high)
+
+    low, high = jax.lax.fori_loop(0, iterations, narrow, (low, high))
+    ends = jnp.minimum(to_box(jnp.zeros_like(low)), to_box(jnp.ones_like(low)))
+    return jnp.minimum(to_box(0.5 * (low + high)), ends)
+
+
 def _actuated_qpos_adr(m: mujoco.MjModel) -> np.ndarray:
     return np.array([m.jnt_qposadr[j] for j in m.actuator_trnid[:, 0]])
 
@@ -157,6 +198,7 @@ class MjxPhysics:
         self.touch_sites = touch_sites(mj_model)
         self.touch_size = np.asarray(mj_model.site_size[self.touch_sites], np.float32)
         self.actuated_qadr = _actuated_qpos_adr(mj_model)
+        self.capsule_box = capsule_box_pairs(mj_model, self.sensor_of_geom)
         self.mjx_model = put_model(mj_model)
 
     def pose(self, qpos: jax.Array, mocap_pos: jax.Array, mocap_quat: jax.Array) -> mjx.Data:
@@ -201,11 +243,32 @@ class MjxPhysics:
             qpos=data.qpos,
             qvel=data.qvel,
             points=data.site_xpos[self.point_sites],
-            contacts=jnp.max(hits, axis=0, initial=0.0),
+            contacts=jnp.maximum(jnp.max(hits, axis=0, initial=0.0), self._capsule_box_near(data)),
             touch=jnp.max(one_hot * pressing[:, None], axis=0, initial=0.0),
             penetration=jnp.maximum(-jnp.min(contact.dist, initial=jnp.inf), 0.0),
             finite=jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all(),
         )
+
+    def _capsule_box_near(self, data: mjx.Data) -> jax.Array:
+        """(15,) 0/1: a sensed phalanx capsule within ``contact_distance`` of a box. MJX's
+        capsule-box collision lists a pair only once it penetrates, where native MuJoCo
+        lists it from ``contact_distance`` apart (``benchmarks/contact_pairs.py``), so the
+        proximity reading measures these pairs' distance itself."""
+        capsules, boxes, sensors = self.capsule_box
+        if capsules.size == 0:
+            return jnp.zeros(len(sh.CONTACT_SENSORS))
+        axis = data.geom_xmat[capsules].reshape(-1, 3, 3)[:, :, 2]  # (P, 3) capsule axes
+        half_length = jnp.asarray(self.mj_model.geom_size[capsules, 1], jnp.float32)[:, None]
+        centre = data.geom_xpos[capsules]
+        gap = segment_box_distance(
+            centre - half_length * axis,
+            centre + half_length * axis,
+            data.geom_xpos[boxes],
+            data.geom_xmat[boxes].reshape(-1, 3, 3),
+            jnp.asarray(self.mj_model.geom_size[boxes], jnp.float32),
+        ) - jnp.asarray(self.mj_model.geom_size[capsules, 0], jnp.float32)
+        near = (gap < self.contact_distance).astype(jnp.float32)  # (P,)
+        return jnp.max(jax.nn.one_hot(sensors, len(sh.CONTACT_SENSORS)) * near[:, None], axis=0)
 
     def reserve(self, worlds: int) -> None:
         """MJX sizes each simulation alone: nothing to reserve."""

@@ -30,9 +30,11 @@ penetration-free starts) and 15 ``touch`` sensors (summed normal force, newtons,
 contacts inside a box site on the palmar side of each phalanx: the authors' sensors,
 ``TOUCH_SITES``).
 A phalanx touches the target when its geom is closer than the environment's
-``contact_distance``: MJX lists every candidate pair with its distance, native MuJoCo
-only pairs closer than their margin plus gap, so ``physics.native_model`` widens its
-copy's gaps to list contacts from that distance. Agent-target contacts push from
+``contact_distance``: native MuJoCo lists pairs closer than their margin plus gap, so
+``physics.native_model`` widens its copy's gaps to list contacts from that distance; MJX
+lists capsule-capsule pairs with their distance but capsule-box pairs only once they
+penetrate, so ``physics.MjxPhysics`` measures the sensed capsule-box pairs' distance
+itself. Agent-target contacts push from
 ``SceneConfig.force_margin`` apart (the pairs' margin; MuJoCo 3.17 and MJX let contacts
 closer than the margin push, and the gap only widens what is listed).
 """

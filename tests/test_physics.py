@@ -424,3 +424,53 @@ def test_a_warp_environment_steps_episodes_as_the_native_one(native_handshake_en
         reward_gap = np.abs(np.asarray(states["warp"].reward - states["native"].reward))
         assert np.median(obs_gap) < 1e-4 and np.mean(obs_gap < 1e-3) >= 0.85, (t, obs_gap)
         assert np.median(reward_gap) < 1e-4, (t, reward_gap)
+
+
+def test_mjx_reads_capsule_box_proximity_as_mujoco_measures_the_distance(native_handshake_env):
+    """MJX's capsule-box collision lists a pair only once it penetrates, so MJX's proximity
+    reading measures each sensed capsule-box pair's distance itself
+    (``physics.segment_box_distance``). Against MuJoCo's own ``mj_geomDistance`` on the
+    same poses: reset starts (half with the fingers bent at random), the target hand moved
+    onto a random phalanx, every pair."""
+    env, reset, _ = native_handshake_env
+    single = env.unwrapped
+    m = single.mj_model
+    _, sensor_of_geom = physics.sensor_objects(m)
+    capsules, boxes, sensors = physics.capsule_box_pairs(m, sensor_of_geom)
+    assert capsules.size >= 15 and set(sensors) == set(range(15))  # every phalanx vs a box
+    states = reset(jax.random.PRNGKey(3))  # 16 episode starts
+    data = mujoco.MjData(m)
+    rng = np.random.default_rng(0)
+    gaps, references = [], []
+    for i in range(16):
+        data.qpos[:] = np.asarray(states.pipeline_state.qpos[i])
+        data.mocap_pos[:] = np.asarray(states.pipeline_state.mocap_pos[i])
+        data.mocap_quat[:] = np.asarray(states.pipeline_state.mocap_quat[i])
+        if i % 2:  # fingers bent at random, so phalanges cross the palm at every angle
+            hand = np.asarray(single.hand_qadr[2:])
+            joints = [int(np.flatnonzero(m.jnt_qposadr == a)[0]) for a in hand]
+            data.qpos[hand] = rng.uniform(m.jnt_range[joints, 0], m.jnt_range[joints, 1])
+        mujoco.mj_kinematics(m, data)
+        # The target hand carried (rigidly) to a random phalanx: its boxes a few cm away.
+        k = rng.integers(capsules.size)
+        shift = data.geom_xpos[capsules[k]] - data.geom_xpos[boxes[k]] + rng.normal(0, 0.02, 3)
+        data.mocap_pos[:] += shift
+        mujoco.mj_kinematics(m, data)
+        axis = data.geom_xmat[capsules].reshape(-1, 3, 3)[:, :, 2]
+        half = m.geom_size[capsules, 1][:, None]
+        gap = physics.segment_box_distance(
+            jnp.asarray(data.geom_xpos[capsules] - half * axis, jnp.float32),
+            jnp.asarray(data.geom_xpos[capsules] + half * axis, jnp.float32),
+            jnp.asarray(data.geom_xpos[boxes], jnp.float32),
+            jnp.asarray(data.geom_xmat[boxes].reshape(-1, 3, 3), jnp.float32),
+            jnp.asarray(m.geom_size[boxes], jnp.float32),
+        ) - m.geom_size[capsules, 0]
+        gaps.append(np.asarray(gap))
+        references.append(
+            [mujoco.mj_geomDistance(m, data, c, b, 1.0, None) for c, b in zip(capsules, boxes)]
+        )
+    gaps, references = np.concatenate(gaps), np.asarray(references).ravel()
+    apart = references > 0
+    assert apart.sum() > 100 and (references < 0.02).sum() > 10, np.sort(references)[:10]
+    np.testing.assert_allclose(gaps[apart], references[apart], atol=2e-5)
+    assert np.all(gaps[~apart] <= 1e-5)  # meeting or penetrating: read as near
