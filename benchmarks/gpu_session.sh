@@ -10,7 +10,7 @@
 #   STAGES=target BUDGET_S=560 bash benchmarks/gpu_session.sh    # handshake: minutes to 90 % from launch
 #   STAGES=paper BUDGET_S=560 bash benchmarks/gpu_session.sh     # --profile paper Fig. 4, 5 seeds
 #   LEARNERS="ddpg nstep3 twin layernorm smoothing delay c51 td3" STAGES=learners ...  # each option
-#   STAGES=physics BUDGET_S=560 bash benchmarks/gpu_session.sh   # MJX, Warp, native: time + train
+#   STAGES=physics BUDGET_S=560 bash benchmarks/gpu_session.sh   # MJX, Warp, native: time, train, transfer
 #
 # STAGES (default "throughput train") picks the stages and their order; training gets
 # whatever of BUDGET_S the stages before it left.
@@ -97,7 +97,8 @@ physics() {
     --control-steps "${CONTROL_STEPS:-20}" $warp --out "$OUT/results_physics.json" 2>&1 | tee "$OUT/physics_throughput.log"
   trained=0; count=$(wc -w <<< "$impls"); done_count=0
   for impl in $impls; do
-    share=$(((BUDGET_S - SECONDS) / (count - done_count))); done_count=$((done_count + 1))
+    # 150 s kept for scoring the policies on both physics after training.
+    share=$(((BUDGET_S - SECONDS - 150) / (count - done_count))); done_count=$((done_count + 1))
     if [ "$share" -lt 120 ]; then
       echo "== physics: ${share} s left for $impl, too little to train: skipped" | tee -a "$OUT/session.log"
       continue
@@ -106,13 +107,22 @@ physics() {
     echo "== physics: training on $impl, --max-minutes $minutes" | tee -a "$OUT/session.log"
     rm -rf "/tmp/gpu_run_$impl"; mkdir -p "$OUT/physics/$impl"
     # shellcheck disable=SC2086  # TINY holds several flags
+    # Contacts push from touching on (force margin 0), where MJX and native agree, so the
+    # policies can be moved between the physics below (physics_agreement.md).
     timeout -s INT "$((share - 10))" python3 train.py --task handshake --mocap-source synthetic --preset gpu \
-      --physics "$impl" --max-minutes "$minutes" --run-dir "/tmp/gpu_run_$impl" $TINY 2>&1 | tee "$OUT/physics/$impl/train.log"
+      --physics "$impl" --scene.force-margin "${FORCE_MARGIN:-0}" --max-minutes "$minutes" \
+      --run-dir "/tmp/gpu_run_$impl" $TINY 2>&1 | tee "$OUT/physics/$impl/train.log"
     for f in metrics.csv success.png config.json; do cp "/tmp/gpu_run_$impl/$f" "$OUT/physics/$impl/" 2>/dev/null; done
     [ -e "$OUT/physics/$impl/metrics.csv" ] && trained=$((trained + 1))
   done
+  # Every trained policy on native MuJoCo and on MJX (transfer both ways, same episodes).
+  runs=$(for impl in $impls; do [ -e "/tmp/gpu_run_$impl/config.json" ] && echo "/tmp/gpu_run_$impl"; done)
+  # shellcheck disable=SC2086  # $runs holds several folders
+  [ -n "$runs" ] && python3 -m benchmarks.physics_transfer $runs --physics native mjx \
+    --episodes "${TRANSFER_EPISODES:-$([ "$DRY_RUN" = 1 ] && echo 4 || echo 128)}" \
+    --out "$OUT/physics/transfer.json" 2>&1 | tee "$OUT/physics/transfer.log"
   # The stage's result: every implementation trained (a dry run fails otherwise).
-  [ "$trained" = "$count" ] && echo "$impls" > "$OUT/physics/trained"
+  [ "$trained" = "$count" ] && [ -e "$OUT/physics/transfer.json" ] && echo "$impls" > "$OUT/physics/trained"
 }
 
 grids_by_task() {
