@@ -67,6 +67,25 @@ def describe() -> dict:
     }
 
 
+def provenance(module: str, argv: list[str] | None) -> dict:
+    """The head of a benchmark's JSON record: the command that rewrites it (``module`` run
+    with ``argv``, default the process's), the machine and the package versions."""
+    import sys
+
+    args = sys.argv[1:] if argv is None else argv
+    return {"command": f"python -m {module} " + " ".join(args), "machine": describe(), "versions": versions()}
+
+
+def write_record(path, record: dict) -> None:
+    """``record`` as indented JSON at ``path`` (its folder made), when a path is given."""
+    import json
+    from pathlib import Path
+
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(record, indent=1))
+
+
 def describe_in_child() -> dict:
     """:func:`describe`, run in a fresh Python so this process never holds the device.
     Launchers call it before their first launch, so a failure costs no measurement."""

@@ -19,8 +19,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
-import json
-import sys
 from pathlib import Path
 
 from benchmarks import machine
@@ -100,19 +98,14 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"not train.py run folders (no config.json): {', '.join(missing)}")
     if "warp" in args.physics and importlib.util.find_spec("warp") is None:
         parser.error('--physics warp needs warp-lang: pip install -e ".[warp]"')
-    record = {
-        "command": "python -m benchmarks.physics_transfer " + " ".join(sys.argv[1:] if argv is None else argv),
+    record = machine.provenance("benchmarks.physics_transfer", argv) | {
         "episodes": args.episodes,
         "seed": args.seed,
-        "machine": machine.describe(),
-        "versions": machine.versions(),
         "runs": {},
     }
     for run_dir in args.runs:  # the record is written after each run: a late failure keeps them
         record["runs"][str(run_dir)] = transfer(run_dir, args.physics, args.episodes, args.seed, args.best)
-        if args.out:
-            args.out.parent.mkdir(parents=True, exist_ok=True)
-            args.out.write_text(json.dumps(record, indent=1))
+        machine.write_record(args.out, record)
     return record
 
 

@@ -22,8 +22,6 @@ one (one degree of freedom more than the hand has).
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 
 import jax
@@ -102,20 +100,14 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--tolerance", type=float, default=0.01, help="m from the goal that counts as reached")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
-    record = {
-        "command": "python -m benchmarks.reachability " + " ".join(sys.argv[1:] if argv is None else argv),
-        "machine": machine.describe(),
-        "versions": machine.versions(),
-    } | reachability(args.task, args.mocap_source, args.max_angle_deg, args.angle_step_deg,
+    record = machine.provenance("benchmarks.reachability", argv) | reachability(args.task, args.mocap_source, args.max_angle_deg, args.angle_step_deg,
                      args.episodes, args.seed, args.restarts, args.ik_iterations, args.tolerance)
     for name in ("reached", "median_distance_m"):
         grid = np.asarray(record[name])
         print(name + " (rows pitch, columns yaw " + ", ".join(f"{a:g}" for a in record["angles_deg"]) + "):")
         for angle, row in zip(record["angles_deg"], grid):
             print(f"  pitch {angle:+5.0f}: " + " ".join(f"{v:4.2f}" for v in row))
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(record, indent=1))
+    machine.write_record(args.out, record)
     return record
 
 
