@@ -14,9 +14,13 @@ Every setup was scored on the same episodes against the same partner
 Rows: success at the end at the nominal pose; averaged over the yaw x pitch cells within
 +-30, +-45 and +-60 degrees; at each speed of the motion sweep; against the static target
 and the recorded partner; under sensing error and action delay; then the naturalness
-metrics (lower is closer to the demonstrations). Values are mean +- standard error over
-the setup's runs (one run: the binomial error over its episodes; one policy's
-naturalness: "(n = 1)").
+metrics (lower is closer to the demonstrations); last, where the folders hold the runs'
+metrics.csv, the training minutes to success at the end of 0.9 in the run's own
+evaluations (against its own training partners). A run that resumed another setup's run
+(the same first rows: static then robust) counts from that run's start, and reaches the
+mark only in evaluations after it. Values are mean +- standard error over the setup's
+runs (one run: the binomial error over its episodes; one policy's naturalness, or one
+run's minutes: "(n = 1)").
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import tyro
 
-from mjx_hands import robustness
+from mjx_hands import grids, robustness
 
 REGIONS_DEG = (30.0, 45.0, 60.0)
 """Half-widths of the yaw x pitch squares whose cells are averaged, degrees."""
@@ -132,6 +136,58 @@ def read_json(folders: Folders, name: str) -> dict | None:
     return pooled
 
 
+TRAINING_MARK = 0.9
+"""Success at the end whose first evaluation the training-cost row times."""
+TRAINING_ROW = f"training minutes to {TRAINING_MARK:g} at the end"
+
+
+def stage_start(rows: list[dict[str, float]], others: list[list[dict[str, float]]]) -> int:
+    """Epoch after which ``rows`` (a metrics.csv) trained on its own: the last epoch of the
+    longest other run whose rows it begins with (it resumed that run), else 0."""
+    start = 0
+    for other in others:
+        if other and len(other) < len(rows) and rows[: len(other)] == other:
+            start = max(start, int(other[-1]["epoch"]))
+    return start
+
+
+def minutes_to_mark(rows: list[dict[str, float]], after_epoch: int) -> float | None:
+    """Wall minutes at the first evaluation past ``after_epoch`` with success at the end
+    >= :data:`TRAINING_MARK`; None where none reaches it."""
+    for row in rows:
+        if row["epoch"] > after_epoch and row.get(grids.HEADLINE, -1.0) >= TRAINING_MARK:
+            return row["time/wall_seconds"] / 60.0
+    return None
+
+
+def training_minutes(setups: dict[str, Folders]) -> dict[str, list[float | None]]:
+    """{label: per-run minutes to the mark (None: not reached)} of the setups whose every
+    folder holds a metrics.csv; a run's stage starts after the other setups' runs it
+    resumed (:func:`stage_start`)."""
+    metrics = {
+        label: [grids.read_rows(f / "metrics.csv") for f in folders]
+        for label, folders in setups.items()
+        if all((f / "metrics.csv").is_file() for f in folders)
+    }
+    return {
+        label: [
+            minutes_to_mark(rows, stage_start(rows, [o for other, runs in metrics.items()
+                                                     if other != label for o in runs]))
+            for rows in runs
+        ]
+        for label, runs in metrics.items()
+    }
+
+
+def training_row(minutes: list[float | None]) -> list:
+    """[mean minutes of the runs that reached the mark, se (None for one), reached, runs]."""
+    reached = np.asarray([m for m in minutes if m is not None], np.float64)
+    if reached.size == 0:
+        return [None, None, 0, len(minutes)]
+    se = float(np.std(reached, ddof=1) / math.sqrt(reached.size)) if reached.size > 1 else None
+    return [float(reached.mean()), se, int(reached.size), len(minutes)]
+
+
 def setup_rows(folder: Folders) -> dict[str, tuple[float, float | None]]:
     """{condition: (mean, se)} of one setup, success at the end and naturalness (se None
     for one policy's naturalness)."""
@@ -189,6 +245,8 @@ def side_by_side(setups: dict[str, Folders]) -> dict:
     if len(set(tasks.values())) > 1:
         raise ValueError(f"the setups are of different tasks: {tasks}")
     per_setup = {label: setup_rows(folder) for label, folder in setups.items()}
+    for label, minutes in training_minutes(setups).items():
+        per_setup[label][TRAINING_ROW] = training_row(minutes)
     conditions = list(dict.fromkeys(c for rows in per_setup.values() for c in rows))
     rows = [
         {"condition": c} | {label: per_setup[label].get(c) for label in setups} for c in conditions
@@ -213,12 +271,22 @@ def markdown(report: dict) -> str:
             value = row[label]
             if value is None:
                 cells.append("")
+            elif row["condition"] == TRAINING_ROW:
+                cells.append(training_cell(*value))
             else:
                 digits = ".4g" if natural else ".2f"
                 spread = "(n = 1)" if value[1] is None else f"± {value[1]:{digits}}"
                 cells.append(f"{value[0]:{digits}} {spread}")
         lines.append(f"| {row['condition']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def training_cell(mean: float | None, se: float | None, reached: int, runs: int) -> str:
+    """The training-cost cell: mean +- se minutes, and how many runs reached the mark."""
+    if mean is None:
+        return f"not reached ({runs} run(s))"
+    text = f"{mean:.1f} " + ("(n = 1)" if se is None else f"± {se:.1f}")
+    return text if reached == runs else f"{text}; {reached} of {runs} reached it"
 
 
 def plot_heatmaps(setups: dict[str, Folders], path: Path) -> None:

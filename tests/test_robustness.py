@@ -234,3 +234,44 @@ def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_pat
     # Bad input is named.
     assert partner_report.main(["static", "--out", str(tmp_path / "x")]) == 2
     assert partner_report.main(["a=" + str(tmp_path), "--out", str(tmp_path / "x")]) == 2
+
+
+def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_resume(tmp_path):
+    """Minutes to 0.9 at the end: a static run and its robust continuation (same first
+    rows), read from metrics.csv as a reader would by hand."""
+    import csv
+    import json
+
+    from mjx_hands import partner_report
+
+    def write(folder, evals):  # evals: per epoch, success at the end or None (no eval)
+        folder.mkdir(parents=True, exist_ok=True)
+        with (folder / "metrics.csv").open("w", newline="") as f:
+            out = csv.writer(f)
+            out.writerow(["epoch", "time/wall_seconds", "eval/success_final"])
+            for epoch, value in enumerate(evals, start=1):
+                out.writerow([epoch, 60.0 * epoch, "" if value is None else value])
+
+    rng = np.random.default_rng(1)
+    static = [None, 0.5, None, 0.95, None, 1.0]  # reaches 0.9 at epoch 4: 4 minutes
+    robust_stage = [None, 0.6, 0.92, 0.97]  # against its own partners: epoch 9
+    seeds = {}
+    for seed, (s, c) in enumerate([(static, static + robust_stage),
+                                   ([0.1, 0.2, 0.91, 1.0, 1.0, 1.0], [0.1, 0.2, 0.91, 1.0, 1.0, 1.0, 0.5, 0.6, 0.7, 0.8])]):
+        for label, evals in (("static", s), ("curriculum", c)):
+            folder = tmp_path / f"seed{seed}" / label
+            _write_sweeps(folder, rng, 1, 32, None)
+            write(folder, evals)
+            seeds.setdefault(label, []).append(str(folder))
+    argv = [f"{label}={','.join(folders)}" for label, folders in seeds.items()]
+    assert partner_report.main([*argv, "--out", str(tmp_path / "out")]) == 0
+    rows = {r["condition"]: r for r in
+            json.loads((tmp_path / "out" / "side_by_side.json").read_text())["rows"]}
+    row = rows[partner_report.TRAINING_ROW]
+    # Static: epochs 4 and 3 (the marks); curriculum: epoch 9 (its seed-0 stage), seed 1
+    # never reaches it after its resume at epoch 6 (the 0.91 at epoch 3 was the static stage's).
+    np.testing.assert_allclose(row["static"][:2], [3.5, np.std([4.0, 3.0], ddof=1) / np.sqrt(2)])
+    assert row["static"][2:] == [2, 2]
+    assert row["curriculum"] == [9.0, None, 1, 2]
+    text = (tmp_path / "out" / "side_by_side.md").read_text()
+    assert f"| {partner_report.TRAINING_ROW} | 3.5 ± 0.5 | 9.0 (n = 1); 1 of 2 reached it |" in text
