@@ -32,6 +32,8 @@ goal offset           18    goal minus current point, per hand point
 imitation offset      18    imitation reference minus current point (0 past t_min)
 target points         18    target palm + fingertips minus agent palm centre
 phase                  2    step / episode length, imitation-active flag
+target velocity        3    with ``observe_target_velocity`` only: the partner's
+                            palm, m/s, world axes, from its observed positions
 ====================  ====  ================================================
 
 That is the project profile's. The paper profile (``EnvConfig.profile = "paper"``,
@@ -217,6 +219,9 @@ class EpisodeInfo:
     partner_base_rot: jax.Array | None = None
     partner_base_quat: jax.Array | None = None
     partner_row: jax.Array | None = None
+    # (3,) the partner's palm as the last observation saw it, sensing error included
+    # (``EnvConfig.observe_target_velocity``): its next observed velocity starts here.
+    seen_target_pos: jax.Array | None = None
 
 
 class HandInteractionEnv(Env):
@@ -470,6 +475,8 @@ class HandInteractionEnv(Env):
             hold = self.action_for(data.ctrl)  # the set-points of the start pose
             queue = jnp.broadcast_to(hold, (self.config.action_delay,) + hold.shape)
             episode = episode.replace(action_queue=queue)
+        if self.config.observe_target_velocity:  # observed still at the first step
+            episode = episode.replace(seen_target_pos=self.seen_target_pos(episode))
         features = self._features(self.physics.readings(data), episode, data)
         zero = jnp.zeros(())
         terms = {k: zero for k in rewards.TERMS + ("total",)}
@@ -611,6 +618,8 @@ class HandInteractionEnv(Env):
         # went on, so blowing up the physics is no escape from negative rewards (as a
         # 0-reward termination would be), and no non-finite number reaches it.
         obs = jnp.where(finite, self._observation(features, episode), state.obs)
+        if episode.seen_target_pos is not None:
+            episode = episode.replace(seen_target_pos=self.seen_target_pos(episode))
         reward = jnp.where(finite, terms["total"], state.reward)
         metrics = dict(state.metrics)  # entries that wrappers (e.g. Brax's) added stay
         metrics |= {f"reward/{k}": jnp.where(finite, v, 0.0) for k, v in terms.items()}
@@ -847,7 +856,15 @@ class HandInteractionEnv(Env):
         key = jax.random.fold_in(jax.random.fold_in(episode.rng, SENSING_KEY), episode.step)
         return noise * jax.random.normal(key, (3,))
 
+    def seen_target_pos(self, episode: EpisodeInfo) -> jax.Array:
+        """The partner's palm (3,) as observed at this step: true position + sensing error."""
+        return episode.target_pos + self.sensing_error(episode)
+
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
+        velocity = None
+        if episode.seen_target_pos is not None:  # this step's observed palm minus the last's
+            seen = self.seen_target_pos(episode)
+            velocity = (seen - episode.seen_target_pos) / jnp.float32(self.config.control_dt)
         error = self.sensing_error(episode)
         if self.config.target_position_noise:
             f = f | {"imitation_points": f["imitation_points"] + error}
@@ -873,18 +890,17 @@ class HandInteractionEnv(Env):
         phase = jnp.stack([episode.step / self.episode_length, f["imitation_active"]]).astype(
             jnp.float32
         )
-        return jnp.concatenate(
-            [
-                f["qpos"],
-                0.1 * f["qvel"],
-                f["contacts"],
-                relative_points.reshape(-1),
-                (episode.goal_points - f["points"]).reshape(-1),
-                ((f["imitation_points"] - f["points"]) * f["imitation_active"]).reshape(-1),
-                (episode.target_points - f["points"][0]).reshape(-1),
-                phase,
-            ]
-        )
+        parts = [
+            f["qpos"],
+            0.1 * f["qvel"],
+            f["contacts"],
+            relative_points.reshape(-1),
+            (episode.goal_points - f["points"]).reshape(-1),
+            ((f["imitation_points"] - f["points"]) * f["imitation_active"]).reshape(-1),
+            (episode.target_points - f["points"][0]).reshape(-1),
+            phase,
+        ]
+        return jnp.concatenate(parts if velocity is None else [*parts, velocity])
 
 
 def _rot_to_quat(rot: np.ndarray) -> np.ndarray:

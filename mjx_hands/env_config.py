@@ -117,6 +117,13 @@ class EnvConfig:
     actuators receiving it (a robot controller's latency); the first steps of an episode
     apply the action that holds the start pose. The reward's action term charges the
     policy's own action. 0: none."""
+    observe_target_velocity: bool = False
+    """Observe the partner's palm velocity too (m/s, world axes; the project observation
+    only): the difference of its last two observed positions over the control period,
+    as a tracker would estimate it, so it carries the sensing error's difference; zeros
+    at an episode's first step. A policy without memory sees only where a moving partner
+    was; this tells it where the partner is going. Part of the observation, not a partner
+    model: both stages of a curriculum must agree on it."""
     partner: Literal[PARTNERS] = "static"
     """Partner model "recorded partner": 'static' (the paper's: the target hand holds one
     pose of its demonstration, drawn per episode between the agent's start and the
@@ -260,6 +267,11 @@ def config_problems(config: EnvConfig) -> list[str]:
                 "target_orientation_range and target_rotation_noise/target_rotation_angle "
                 "both turn the target: give one"
             )
+    if config.observe_target_velocity and profiles.env_profile(config.profile).observation == "paper":
+        problems.append(
+            "observe_target_velocity needs the project observation; the paper profile's is "
+            "the authors' (no velocity of the partner)"
+        )
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
     if not (np.isfinite(config.partner_share) and 0 <= config.partner_share <= 1):

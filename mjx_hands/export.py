@@ -87,6 +87,9 @@ def observation_layout(single) -> list[dict[str, Any]]:
             ("target_points", 18, "m, world axes", "target palm + fingertips minus agent palm"),
             ("phase", 2, "1", "step / episode length, imitation active (0/1)"),
         ]
+        if single.config.observe_target_velocity:
+            parts.append(("target_velocity", 3, "m/s, world axes",
+                          "observed target palm minus the last step's, over the control period"))
     layout = [dict(zip(("name", "size", "units", "meaning"), p)) for p in parts]
     total = sum(p["size"] for p in layout)
     if total != single.observation_size:
@@ -188,6 +191,7 @@ def export(args: ExportArgs, out=sys.stdout) -> dict[str, Any]:
             "profile": config.env.profile,
             "observation": single.profile.observation,
             "contact_rule": single.profile.contact_rule,
+            "observe_target_velocity": single.config.observe_target_velocity,
             "contact_distance": single.config.contact_distance,
             "control_dt": single.config.control_dt,
             "substeps": single.n_substeps,

@@ -107,6 +107,10 @@ class Player:
                 at["target_points"] - points[0],
                 phase,
             ]
+            if self.env.get("observe_target_velocity"):  # observed palm minus the last step's
+                seen = partner["target_pos"]
+                step = seen[k] - seen[k - 1] if k > 0 else np.zeros(3, F32)
+                parts.append(np.asarray(step, F32) / F32(self.env["control_dt"]))
         return np.concatenate([np.asarray(p, F32).reshape(-1) for p in parts])
 
     def act(self, observation: np.ndarray) -> np.ndarray:

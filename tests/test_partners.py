@@ -184,6 +184,47 @@ def test_the_motion_partner_draws_each_episodes_speed_from_its_range():
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_speed_range=(0.3, 0.1)))
 
 
+def test_the_observed_target_velocity_is_the_difference_of_observed_palms_over_the_period():
+    """A moving, recorded, noisily seen partner: the last 3 observation entries are the
+    observed palm's step over the control period (the export's schedule, a separate
+    scan, as reference), zeros at the first step; the rest is the observation without it."""
+    config = {
+        "mocap_source": "synthetic", "physics": "native", "partner": "recorded",
+        "target_speed_range": (0.1, 0.3), "target_position_noise": 0.003,
+    }  # fmt: skip
+    seeing = env_lib.make_env("et", observe_target_velocity=True, **config)
+    blind = env_lib.make_env("et", **config)
+    assert seeing.observation_size == blind.observation_size + 3
+    keys = jax.random.split(jax.random.PRNGKey(8), 4)
+    a, b = jax.jit(jax.vmap(seeing.reset))(keys), jax.jit(jax.vmap(blind.reset))(keys)
+    schedule = jax.jit(jax.vmap(seeing.partner_schedule))(a)  # the episodes' whole schedule
+    seen = np.asarray(schedule["target_pos"])  # (4, T+1, 3) the palm as observed
+    np.testing.assert_array_equal(np.asarray(a.obs)[:, -3:], 0.0)
+    actions = jnp.asarray(np.random.default_rng(1).uniform(-1, 1, (5, 4, 24)), jnp.float32)
+    step_a, step_b = jax.jit(jax.vmap(seeing.step)), jax.jit(jax.vmap(blind.step))
+    for k, action in enumerate(actions, start=1):
+        a, b = step_a(a, action), step_b(b, action)
+        np.testing.assert_array_equal(np.asarray(a.obs)[:, :-3], np.asarray(b.obs))
+        expected = (seen[:, k] - seen[:, k - 1]) / seeing.config.control_dt
+        np.testing.assert_allclose(np.asarray(a.obs)[:, -3:], expected, atol=1e-4)
+    assert np.abs(expected).max() > 0.05  # it moved: 0.1-0.3 m/s plus noise
+    # The exported player builds the same entries from the exported schedule.
+    from types import SimpleNamespace
+
+    from mjx_hands import onnx_player
+
+    env = {"observation": "project", "episode_length": seeing.episode_length,
+           "control_dt": seeing.config.control_dt, "observe_target_velocity": True}  # fmt: skip
+    schedule = {k: np.asarray(v)[0] for k, v in schedule.items()}
+    readings = {"points": np.zeros((6, 3), np.float32), "contacts": np.zeros(15, np.float32)}
+    played = onnx_player.Player.observation(
+        SimpleNamespace(env=env), 5, np.zeros(28), np.zeros(28), readings, schedule
+    )
+    np.testing.assert_allclose(played[-3:], np.asarray(a.obs)[0, -3:], atol=1e-4)
+    with pytest.raises(ValueError, match="observe_target_velocity needs the project observation"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(profile="paper", observe_target_velocity=True))
+
+
 # ------------------------------------------------------------- the recorded partner
 def _turning_demo(path_recorded: bool, frames: int = 25, fps: float = 50.0):
     """A handshake-like demonstration built from world poses: the target palm turns 30°
