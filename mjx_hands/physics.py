@@ -169,14 +169,27 @@ def segment_box_distance(
 
     ratio = (np.sqrt(5.0) - 1.0) / 2.0
     low, high = jnp.zeros(a.shape[:-1]), jnp.ones(a.shape[:-1])
+    left, right = high - ratio, low + ratio
 
-    def narrow(_, bounds):
-        low, high = bounds
-        left, right = high - ratio * (high - low), low + ratio * (high - low)
-        keep_left = to_box(left) <= to_box(right)
-        return jnp.where(keep_left, low, left), jnp.where(keep_left, right, high)
+    def narrow(_, search):
+        # Golden section: the kept interior point is the next step's other one, so each
+        # step measures one new point.
+        low, high, left, right, at_left, at_right = search
+        keep_left = at_left <= at_right
+        low, high = jnp.where(keep_left, low, left), jnp.where(keep_left, right, high)
+        fresh = jnp.where(keep_left, high - ratio * (high - low), low + ratio * (high - low))
+        at_fresh = to_box(fresh)
+        return (
+            low,
+            high,
+            jnp.where(keep_left, fresh, right),
+            jnp.where(keep_left, left, fresh),
+            jnp.where(keep_left, at_fresh, at_right),
+            jnp.where(keep_left, at_left, at_fresh),
+        )
 
-    low, high = jax.lax.fori_loop(0, iterations, narrow, (low, high))
+    search = (low, high, left, right, to_box(left), to_box(right))
+    low, high, *_ = jax.lax.fori_loop(0, iterations, narrow, search)
     ends = jnp.minimum(to_box(jnp.zeros_like(low)), to_box(jnp.ones_like(low)))
     return jnp.minimum(to_box(0.5 * (low + high)), ends)
 
