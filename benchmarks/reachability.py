@@ -20,7 +20,7 @@ A handshake or a clap needs the palm turned as well as placed: with
 ``--rotation-weight W`` (metres per radian, > 0; palm tasks) the IK also turns the palm to
 its demonstrated orientation at contact (the demonstration's palm relative to the target
 palm at t_min, turned with the target). The robot arm misses the human's pose already at
-the nominal pose (by ~3 cm and ~25 deg), where the policies succeed; so an episode counts
+the nominal pose (by ~3 cm and ~23 deg), where the policies succeed; so an episode counts
 as reached in a cell where its misses exceed its own at the nominal pose by no more than
 ``--tolerance`` and ``--angle-tolerance`` degrees. The median angle is reported either way. Kinematics only: collisions between the hands are not checked, and the
 index finger's distal joint moves freely in the IK where the hand couples it to the middle

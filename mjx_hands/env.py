@@ -21,7 +21,7 @@ Episode randomisation (the paper's training method):
   backs away from the target's along the line between the palm centres instead, at
   most ``start_retreats`` moves in all (``_separated_start``).
 
-Observation (``observation_size`` = 145), in this order:
+Observation (``observation_size`` = 145, 148 with ``observe_target_velocity``), in this order:
 
 ====================  ====  ================================================
 agent qpos            28    arm (4) + hand joints (24), radians

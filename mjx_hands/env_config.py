@@ -120,8 +120,9 @@ class EnvConfig:
     observe_target_velocity: bool = False
     """Observe the partner's palm velocity too (m/s, world axes; the project observation
     only): the difference of its last two observed positions over the control period,
-    as a tracker would estimate it, so it carries the sensing error's difference; zeros
-    at an episode's first step. A policy without memory sees only where a moving partner
+    as a tracker would estimate it, so it carries the sensing error's difference
+    (sqrt(2) x noise / period per axis: 0.07 m/s at 2 mm); zeros at an episode's first
+    step. A policy without memory sees only where a moving partner
     was; this tells it where the partner is going. Part of the observation, not a partner
     model: both stages of a curriculum must agree on it."""
     partner: Literal[PARTNERS] = "static"

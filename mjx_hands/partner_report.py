@@ -17,8 +17,9 @@ and the recorded partner; under sensing error and action delay; then the natural
 metrics (lower is closer to the demonstrations); last, where the folders hold the runs'
 metrics.csv, the training minutes to success at the end of 0.9 in the run's own
 evaluations (against its own training partners). A run that resumed another setup's run
-(the same first rows: static then robust) counts from that run's start, and reaches the
-mark only in evaluations after it. Values are mean +- standard error over the setup's
+trained against other partners (the same first rows, other ``partners`` in config.json:
+static then robust) counts from that run's start, and reaches the mark only in
+evaluations after it; without the other setup's metrics.csv it counts from its start. Values are mean +- standard error over the setup's
 runs (one run: the binomial error over its episodes; one policy's naturalness, or one
 run's minutes: "(n = 1)").
 """
@@ -141,12 +142,30 @@ TRAINING_MARK = 0.9
 TRAINING_ROW = f"training minutes to {TRAINING_MARK:g} at the end"
 
 
-def stage_start(rows: list[dict[str, float]], others: list[list[dict[str, float]]]) -> int:
-    """Epoch after which ``rows`` (a metrics.csv) trained on its own: the last epoch of the
-    longest other run whose rows it begins with (it resumed that run), else 0."""
+Run = tuple[list[dict[str, float]], object]
+"""A run's metrics.csv rows and the partner models it last trained with (config.json's
+``partners``; None where unknown)."""
+
+
+def same_rows(a: list[dict[str, float]], b: list[dict[str, float]]) -> bool:
+    """Whether two runs' metrics rows are the same (NaN, e.g. no episode ended in an
+    epoch, equal to NaN)."""
+    same = lambda x, y: x == y or (math.isnan(x) and math.isnan(y))
+    return len(a) == len(b) and all(
+        r.keys() == q.keys() and all(same(v, q[k]) for k, v in r.items()) for r, q in zip(a, b)
+    )
+
+
+def stage_start(run: Run, others: list[Run]) -> int:
+    """Epoch after which ``run`` trained against its own partner models: the last epoch of
+    the longest other run it begins with (it resumed that run) that trained against other
+    partners (or whose partners are unknown), else 0."""
+    rows, partners = run
     start = 0
-    for other in others:
-        if other and len(other) < len(rows) and rows[: len(other)] == other:
+    for other, other_partners in others:
+        resumed = other and len(other) < len(rows) and same_rows(rows[: len(other)], other)
+        changed = partners is None or other_partners is None or other_partners != partners
+        if resumed and changed:
             start = max(start, int(other[-1]["epoch"]))
     return start
 
@@ -160,22 +179,28 @@ def minutes_to_mark(rows: list[dict[str, float]], after_epoch: int) -> float | N
     return None
 
 
+def read_run(folder: Path) -> Run:
+    """``folder``'s metrics rows and the partner models of its config.json (None: none)."""
+    config = folder / "config.json"
+    partners = json.loads(config.read_text()).get("partners") if config.is_file() else None
+    return grids.read_rows(folder / "metrics.csv"), partners
+
+
 def training_minutes(setups: dict[str, Folders]) -> dict[str, list[float | None]]:
     """{label: per-run minutes to the mark (None: not reached)} of the setups whose every
     folder holds a metrics.csv; a run's stage starts after the other setups' runs it
-    resumed (:func:`stage_start`)."""
-    metrics = {
-        label: [grids.read_rows(f / "metrics.csv") for f in folders]
+    resumed against other partners (:func:`stage_start`)."""
+    runs = {
+        label: [read_run(f) for f in folders]
         for label, folders in setups.items()
         if all((f / "metrics.csv").is_file() for f in folders)
     }
     return {
         label: [
-            minutes_to_mark(rows, stage_start(rows, [o for other, runs in metrics.items()
-                                                     if other != label for o in runs]))
-            for rows in runs
+            minutes_to_mark(run[0], stage_start(run, [o for k, rs in runs.items() if k != label for o in rs]))
+            for run in mine
         ]
-        for label, runs in metrics.items()
+        for label, mine in runs.items()
     }
 
 
@@ -237,7 +262,8 @@ def setup_rows(folder: Folders) -> dict[str, tuple[float, float | None]]:
 def side_by_side(setups: dict[str, Folders]) -> dict:
     """{'task', 'setups', 'rows': [{'condition', label: [mean, se] or None, ...}]} over
     every condition any setup has, in first-seen order (se None for one policy's
-    naturalness); all setups of one task."""
+    naturalness; the training-cost row :func:`training_row`'s [mean, se, reached, runs]);
+    all setups of one task."""
     tasks = {
         label: read_json(folder, robustness.ORIENTATION_FILE)["task"]
         for label, folder in setups.items()

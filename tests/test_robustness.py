@@ -237,41 +237,53 @@ def test_the_side_by_side_report_averages_regions_and_runs_as_numpy_does(tmp_pat
 
 
 def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_resume(tmp_path):
-    """Minutes to 0.9 at the end: a static run and its robust continuation (same first
-    rows), read from metrics.csv as a reader would by hand."""
+    """Minutes to 0.9 at the end: a static run, its robust continuation (same first rows,
+    NaN where no episode ended) and a longer robust run resumed from that, read from
+    metrics.csv and config.json as a reader would by hand."""
     import csv
     import json
 
     from mjx_hands import partner_report
 
-    def write(folder, evals):  # evals: per epoch, success at the end or None (no eval)
+    def write(folder, evals, partners):  # evals: per epoch, success at the end or None
         folder.mkdir(parents=True, exist_ok=True)
+        (folder / "config.json").write_text(json.dumps({"partners": partners}))
         with (folder / "metrics.csv").open("w", newline="") as f:
             out = csv.writer(f)
-            out.writerow(["epoch", "time/wall_seconds", "eval/success_final"])
+            out.writerow(["epoch", "time/wall_seconds", "train/success", "eval/success_final"])
             for epoch, value in enumerate(evals, start=1):
-                out.writerow([epoch, 60.0 * epoch, "" if value is None else value])
+                ended = "nan" if epoch % 2 else 0.5  # no episode ended in odd epochs
+                out.writerow([epoch, 60.0 * epoch, ended, "" if value is None else value])
 
     rng = np.random.default_rng(1)
     static = [None, 0.5, None, 0.95, None, 1.0]  # reaches 0.9 at epoch 4: 4 minutes
     robust_stage = [None, 0.6, 0.92, 0.97]  # against its own partners: epoch 9
+    early = [0.1, 0.2, 0.91, 1.0, 1.0, 1.0]  # seed 1: 3 minutes, and never after its resume
+    runs = [
+        (static, static + robust_stage, static + robust_stage + [1.0, 1.0]),
+        (early, early + [0.5, 0.6, 0.7, 0.8], early + [0.5, 0.6, 0.7, 0.8, 0.5, 0.95]),
+    ]
     seeds = {}
-    for seed, (s, c) in enumerate([(static, static + robust_stage),
-                                   ([0.1, 0.2, 0.91, 1.0, 1.0, 1.0], [0.1, 0.2, 0.91, 1.0, 1.0, 1.0, 0.5, 0.6, 0.7, 0.8])]):
-        for label, evals in (("static", s), ("curriculum", c)):
+    for seed, evals in enumerate(runs):
+        for label, partners, values in zip(("static", "curriculum", "longer"),
+                                           ("static", "robust", "robust"), evals):  # fmt: skip
             folder = tmp_path / f"seed{seed}" / label
             _write_sweeps(folder, rng, 1, 32, None)
-            write(folder, evals)
+            write(folder, values, partners)
             seeds.setdefault(label, []).append(str(folder))
     argv = [f"{label}={','.join(folders)}" for label, folders in seeds.items()]
     assert partner_report.main([*argv, "--out", str(tmp_path / "out")]) == 0
-    rows = {r["condition"]: r for r in
-            json.loads((tmp_path / "out" / "side_by_side.json").read_text())["rows"]}
+    rows = {
+        r["condition"]: r
+        for r in json.loads((tmp_path / "out" / "side_by_side.json").read_text())["rows"]
+    }
     row = rows[partner_report.TRAINING_ROW]
-    # Static: epochs 4 and 3 (the marks); curriculum: epoch 9 (its seed-0 stage), seed 1
-    # never reaches it after its resume at epoch 6 (the 0.91 at epoch 3 was the static stage's).
+    # Static: epochs 4 and 3; curriculum: epoch 9 (seed 0), seed 1 never after its resume
+    # at epoch 6 (the 0.91 at epoch 3 was the static stage's); the longer run's stage
+    # starts where the partners changed (epoch 6, not the curriculum's 10): 9 and 12.
     np.testing.assert_allclose(row["static"][:2], [3.5, np.std([4.0, 3.0], ddof=1) / np.sqrt(2)])
     assert row["static"][2:] == [2, 2]
     assert row["curriculum"] == [9.0, None, 1, 2]
+    np.testing.assert_allclose(row["longer"][:2], [10.5, 1.5])
     text = (tmp_path / "out" / "side_by_side.md").read_text()
     assert f"| {partner_report.TRAINING_ROW} | 3.5 ± 0.5 | 9.0 (n = 1); 1 of 2 reached it |" in text
