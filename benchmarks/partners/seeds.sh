@@ -13,7 +13,11 @@
 # Archived into benchmarks/partners/<task>/seed<k>/{static,static_then_robust}/ and named
 # in runs/partners/status; `python -m benchmarks.regenerate` pools the seeds into the
 # side-by-side table (benchmarks/partners/<task>/side_by_side.md). RUNS overrides the
-# folder of the run directories.
+# folder of the run directories. FLAGS adds train.py flags to both stages (e.g. an
+# observation setting both must share) and LABEL names the variant, archived into
+# benchmarks/partners/<task>_<LABEL>/:
+#
+#   FLAGS=--observe-target-velocity LABEL=velocity nohup bash benchmarks/partners/seeds.sh handclap 0 &
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -26,16 +30,18 @@ snap=$(mktemp -d "$root/../.mjx-hands-partners-code-XXXX")
 trap 'rm -rf "$snap"' EXIT
 git archive HEAD | tar -x -C "$snap"
 python=${PYTHON:-$root/.venv/bin/python}
+read -ra flags <<< "${FLAGS:-}"
+variant=${LABEL:+_$LABEL}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
 
 one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error
   local seed=$1 static=$runs/$name-static curriculum=$runs/$name-static_then_robust
   rm -rf "$static" "$curriculum" "$runs/$name-sweeps" "$dest.tmp"
   mkdir -p "$runs/$name-sweeps"
-  run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" \
+  run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" "${flags[@]}" \
     --run-dir "$static" > "$static.log" 2>&1 || return 1
   cp -r "$static" "$curriculum" || return 1
-  run train.py --run-dir "$curriculum" --resume --partners robust --epochs 100 \
+  run train.py --run-dir "$curriculum" --resume --partners robust --epochs 100 "${flags[@]}" \
     > "$curriculum.log" 2>&1 || return 1
   for setup in static static_then_robust; do
     local out=$runs/$name-sweeps/$setup
@@ -53,8 +59,8 @@ one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its fi
 }
 
 for seed in "$@"; do
-  name=$task-s$seed
-  dest=$root/benchmarks/partners/$task/seed$seed
+  name=$task$variant-s$seed
+  dest=$root/benchmarks/partners/$task$variant/seed$seed
   if [ -e "$dest" ]; then echo "$name: $dest exists, skipped" >> "$runs/status"; continue; fi
   if one_seed "$seed"; then  # a seed is archived whole or not at all
     mv "$dest.tmp" "$dest"
