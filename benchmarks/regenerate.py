@@ -69,6 +69,13 @@ REPORTS: dict[str, list[str]] = {
         "static-then-robust=benchmarks/partners/handclap/seed0/static_then_robust",
         "static-then-robust-160=benchmarks/partners/clap_pilot/static_then_robust_160",
     ],
+    "benchmarks/partners/handclap_velocity": [
+        "partner_report",
+        "static=benchmarks/partners/handclap/seed*/static",
+        "static-then-robust=benchmarks/partners/handclap/seed*/static_then_robust",
+        "velocity-static=benchmarks/partners/handclap_velocity/seed*/static",
+        "velocity-static-then-robust=benchmarks/partners/handclap_velocity/seed*/static_then_robust",
+    ],
     **{
         f"benchmarks/partners/{task}": [
             "partner_report",
@@ -89,11 +96,15 @@ TEXT_SUFFIXES = (".md", ".csv", ".json")
 
 def expand(command: list[str]) -> list[str]:
     """``command`` with every ``*`` argument replaced by the paths it matches under ROOT
-    (``LABEL=pattern``: by ``LABEL=`` and the paths joined by commas, none when none match)."""
+    (``LABEL=pattern``: by ``LABEL=`` and the paths joined by commas, none when none match),
+    leaving out folders still being archived (``*.tmp``)."""
     out = []
     for arg in command:
         label, _, pattern = arg.rpartition("=")
-        matches = sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern)) if "*" in arg else [arg]
+        found = ROOT.glob(pattern) if "*" in arg else ()
+        # A seed being archived (seeds.sh's "<dest>.tmp") is not a record yet.
+        found = [p for p in found if not any(part.endswith(".tmp") for part in p.parts)]
+        matches = sorted(str(p.relative_to(ROOT)) for p in found) if "*" in arg else [arg]
         if label and "*" in arg:
             matches = [f"{label}={','.join(matches)}"] if matches else []
         out += matches

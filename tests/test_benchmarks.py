@@ -164,3 +164,19 @@ def test_every_committed_results_table_equals_its_regeneration_from_records(caps
 
     code = regenerate.main(["--check"])
     assert code == 0, capsys.readouterr().out
+
+
+def test_contact_hold_counts_the_steps_in_contact_after_the_first_and_the_changes():
+    """Three hand-made episodes: held from step 2, patting on and off, never touching."""
+    from benchmarks import contact_hold
+
+    held = [0, 0, 1, 1, 1, 1, 1, 1]
+    patting = [0, 1, 0, 1, 0, 1, 0, 1]
+    never = [0] * 8
+    stats = contact_hold.hold_statistics(np.array([held, patting, never], bool).T)
+    assert stats["success_final"] == pytest.approx(2 / 3)
+    assert stats["success_some_step"] == pytest.approx(2 / 3)
+    assert stats["first_contact_step_median"] == 1.5  # steps 2 and 1
+    assert stats["share_in_contact_after_first"] == pytest.approx((6 / 6 + 4 / 7) / 2)
+    assert stats["contact_changes_median"] == 1.0  # 1, 7 and 0 changes
+    assert stats["share_in_contact_last_10_steps"] == pytest.approx((6 + 4) / 24)
