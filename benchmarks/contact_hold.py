@@ -45,7 +45,8 @@ def measure(run_dir: str, speeds: list[float], episodes: int, seed: int) -> dict
     """{speed: hold statistics} of one run's policy."""
     loaded = policies.load_policy(run_dir, eval_envs=episodes)
     scoring = env_lib.scoring_env(loaded.single.config)
-    moving = robustness.moving_target_env(scoring, 0.5, (0.1, 0.1, 0.1))
+    sweep = robustness.RobustnessArgs  # the motion sweep's own turns and box
+    moving = robustness.moving_target_env(scoring, sweep.turn_period, sweep.motion_box)
     reset = robustness.sweep_reset(moving, moving=True)
     keys = rollouts.episode_keys(seed, episodes)
     tilts = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (episodes, 1))

@@ -861,11 +861,11 @@ class HandInteractionEnv(Env):
         return episode.target_pos + self.sensing_error(episode)
 
     def _observation(self, f: dict[str, jax.Array], episode: EpisodeInfo) -> jax.Array:
+        error = self.sensing_error(episode)
         velocity = None
         if episode.seen_target_pos is not None:  # this step's observed palm minus the last's
-            seen = self.seen_target_pos(episode)
+            seen = episode.target_pos + error
             velocity = (seen - episode.seen_target_pos) / jnp.float32(self.config.control_dt)
-        error = self.sensing_error(episode)
         if self.config.target_position_noise:
             f = f | {"imitation_points": f["imitation_points"] + error}
             if "target_links" in f:
