@@ -219,6 +219,10 @@ class EpisodeInfo:
     partner_base_rot: jax.Array | None = None
     partner_base_quat: jax.Array | None = None
     partner_row: jax.Array | None = None
+    # () bool: whether the recorded partner replays its approach in this episode or holds
+    # its placed pose and row as the static hand (``EnvConfig.partner_model_probability``
+    # below 1); None: it replays.
+    partner_replays: jax.Array | None = None
     # (3,) the partner's palm as the last observation saw it, sensing error included
     # (``EnvConfig.observe_target_velocity``): its next observed velocity starts here.
     seen_target_pos: jax.Array | None = None
@@ -391,8 +395,10 @@ class HandInteractionEnv(Env):
         frame = jax.random.randint(k_frame, (), start, jnp.maximum(t_min, start) + 1)
 
         target_pos = self.target_center + self._box_offset(k_box)
+        applies = self._partner_models_apply(jax.random.fold_in(k_motion, 4))
         if tilt is None and self.config.target_orientation_range is not None:
             tilt = orientation_tilt(k_rot, self.config.target_orientation_range)
+            tilt = jnp.where(applies["orientation"], tilt, jnp.array([1.0, 0.0, 0.0, 0.0]))
         elif tilt is None:
             tilt = target_tilt(
                 k_rot, self.config.target_rotation_noise, self.config.target_rotation_angle
@@ -410,11 +416,15 @@ class HandInteractionEnv(Env):
             its palm (position, rotation, quaternion), its partner-table row and
             :meth:`_target_at`'s arrays. Static: the drawn frame, wherever the agent
             starts; recorded: the partner's own time, ``step`` + the episode's lag."""
+            held = base, frame, self._target_at(demo, frame, *base)
             if not recorded:
-                return base, frame, self._target_at(demo, frame, *base)
+                return held
             row = jnp.clip(step + lag, 0, self.partner_pos.shape[1] - 1)
             pose = self._partner_pose(demo, row, base)
-            return pose, row, self._target_at(demo, row, *pose)
+            replayed = pose, row, self._target_at(demo, row, *pose)
+            if applies["recorded"] is True:
+                return replayed
+            return jax.tree.map(functools.partial(jnp.where, applies["recorded"]), replayed, held)
 
         def start_pose(
             step: jax.Array, backoff: jax.Array
@@ -459,6 +469,7 @@ class HandInteractionEnv(Env):
                 speed = jax.random.uniform(
                     jax.random.fold_in(k_motion, 1), (), minval=low, maxval=high
                 )
+                speed = jnp.where(applies["motion"], speed, 0.0)
             elif speed is None:
                 speed = self.config.target_speed
             episode = episode.replace(
@@ -470,6 +481,7 @@ class HandInteractionEnv(Env):
                 partner_base_rot=base[1],
                 partner_base_quat=base[2],
                 partner_row=row,
+                partner_replays=None if applies["recorded"] is True else applies["recorded"],
             )
         if self.config.action_delay > 0:
             hold = self.action_for(data.ctrl)  # the set-points of the start pose
@@ -496,6 +508,17 @@ class HandInteractionEnv(Env):
                 "reward_weights": self.variant,
             },
         )
+
+    def _partner_models_apply(self, rng: jax.Array) -> dict[str, jax.Array | bool]:
+        """Whether each partner model (orientation, motion, recorded) applies to the
+        episode keyed ``rng``: independent draws with ``partner_model_probability``;
+        Python True for every model when it is 1 (nothing drawn, nothing traced)."""
+        probability = self.config.partner_model_probability
+        names = ("orientation", "motion", "recorded")
+        if probability == 1:
+            return dict.fromkeys(names, True)
+        draws = jax.random.bernoulli(rng, probability, (len(names),))
+        return {name: draws[i] for i, name in enumerate(names)}
 
     def _start_qpos(
         self, palm_goal: jax.Array, palm_rot: jax.Array, fingers: jax.Array
@@ -696,6 +719,11 @@ class HandInteractionEnv(Env):
         row = jnp.clip(episode.partner_row + episode.step + 1, 0, self.partner_pos.shape[1] - 1)
         base = (episode.partner_base_pos, episode.partner_base_rot, episode.partner_base_quat)
         pos, rot, quat = self._partner_pose(episode.demo, row, base)
+        if episode.partner_replays is not None:  # or it holds its placed pose and row
+            row = jnp.where(episode.partner_replays, row, episode.partner_row)
+            pos, rot, quat = jax.tree.map(
+                functools.partial(jnp.where, episode.partner_replays), (pos, rot, quat), base
+            )
         link_pos, link_quat, points, frames, goals = self._target_at(
             episode.demo, row, pos, rot, quat
         )

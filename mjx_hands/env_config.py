@@ -133,6 +133,14 @@ class EnvConfig:
     closest approach, and its fingers move through their recorded angles, closing at
     contact; then it holds the window's last frame). Goals and imitation references
     follow it. See ``mjx_hands.partner``."""
+    partner_model_probability: float = 1.0
+    """Per episode, each of the partner models orientation (``target_orientation_range``),
+    motion (``target_speed_range``) and recorded partner (``partner = 'recorded'``)
+    applies with this probability, independently; an episode it skips has that model's
+    static counterpart (the nominal orientation, a still target, the paper's static
+    hand). Sensing error and action delay always apply. 1: every model in every episode;
+    below 1 a robust stage keeps practising each condition alone and the static one,
+    as it is scored (``mjx_hands.robustness`` changes one condition at a time)."""
     partner_share: float = DEFAULT_SHARE
     """The recorded partner's share of the palms' closing where the recordings hold only
     the palm-to-palm vector (the authors' release; imported takes record the path)."""
@@ -179,9 +187,10 @@ class EnvConfig:
             raise ValueError("EnvConfig: " + "; ".join(problems))
 
 
-PARTNER_SETUPS = ("static", "robust")
+PARTNER_SETUPS = ("static", "robust", "mixed")
 """Named sets of partner models to train with (``--partners``): the paper's static target,
-or :data:`ROBUST_PARTNERS`."""
+:data:`ROBUST_PARTNERS` (every model in every episode) or :data:`MIXED_PARTNERS` (each
+model in half the episodes)."""
 ROBUST_PARTNERS = {
     "partner": "recorded",
     # A margin past the +-30 deg yaw x pitch the robust policy is held to; roll +-10 deg.
@@ -195,14 +204,21 @@ ROBUST_PARTNERS = {
 turned per episode, carried along at a random speed, observed with 2 mm noise."""
 
 
+MIXED_PARTNERS = ROBUST_PARTNERS | {"partner_model_probability": 0.5}
+"""The robust setup's models, each drawn on in half the episodes (independently): an
+eighth of the episodes meet the static partner, three eighths one model alone."""
+
+
 def with_partners(config: EnvConfig, setup: str) -> EnvConfig:
     """``config`` against the partner models of ``setup`` (``PARTNER_SETUPS``), every
     partner field set: 'static' the paper's static partner (:func:`static_partner`),
-    'robust' :data:`ROBUST_PARTNERS` over it. Flags parsed afterwards override fields."""
+    'robust' :data:`ROBUST_PARTNERS` and 'mixed' :data:`MIXED_PARTNERS` over it. Flags
+    parsed afterwards override fields."""
     if setup not in PARTNER_SETUPS:
         raise ValueError(f"unknown partners {setup!r}; expected one of {', '.join(PARTNER_SETUPS)}")
     static = static_partner(config)
-    return static if setup == "static" else dataclasses.replace(static, **ROBUST_PARTNERS)
+    models = {"static": {}, "robust": ROBUST_PARTNERS, "mixed": MIXED_PARTNERS}[setup]
+    return dataclasses.replace(static, **models)
 
 
 STATIC_PARTNER = {
@@ -214,6 +230,7 @@ STATIC_PARTNER = {
     "target_speed_range": None,
     "target_position_noise": 0.0,
     "action_delay": 0,
+    "partner_model_probability": 1.0,
 }
 """The paper's partner: a static hand at its nominal orientation, seen exactly, with
 actions applied at once."""
@@ -275,6 +292,9 @@ def config_problems(config: EnvConfig) -> list[str]:
         )
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
+    probability = config.partner_model_probability
+    if not (np.isfinite(probability) and 0 <= probability <= 1):
+        problems.append(f"partner_model_probability {probability} must be in [0, 1]")
     if not (np.isfinite(config.partner_share) and 0 <= config.partner_share <= 1):
         problems.append(f"partner_share {config.partner_share} must be in [0, 1]")
     lag = config.partner_lag

@@ -45,7 +45,9 @@ class TrainConfig:
     partners: Literal[PARTNER_SETUPS] = "static"
     """The partner models to train against: 'static' (the paper's target hand) or
     'robust' (``env_config.ROBUST_PARTNERS``: the recorded partner, turned up to 35 deg,
-    moving up to 0.25 m/s, observed with 2 mm noise). Partner flags given as well
+    moving up to 0.25 m/s, observed with 2 mm noise; every model in every episode) or
+    'mixed' (``env_config.MIXED_PARTNERS``: the same models, each drawn on in half the
+    episodes, independently). Partner flags given as well
     (``--partner``, ``--target-speed-range`` ...) override the setup's."""
     num_envs: int = 64
     """Parallel environments (summed over devices)."""

@@ -461,12 +461,62 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
         f.name
         for f in dataclasses.fields(env_lib.EnvConfig)
         if f.name.startswith(("target_rotation", "target_orientation", "target_speed"))
-        or f.name in ("target_position_noise", "action_delay", "partner")
+        or f.name in ("target_position_noise", "action_delay", "partner", "partner_model_probability")
     }
     assert documented <= set(env_config.STATIC_PARTNER)
     # One scoring environment for both, so every policy of a program shares its compiles.
     assert env_lib.scoring_env(robust) is env_lib.scoring_env(nominal)
     assert env_lib.scoring_env(robust).config == nominal
+
+
+def test_the_mixed_setup_draws_each_partner_model_in_half_the_episodes_independently():
+    """Orientation, motion and recorded partner each apply with probability 0.5; an
+    episode that skips all three is the static partner's episode, step for step."""
+    from mjx_hands import env_config
+
+    config = dict(task="et", mocap_source="synthetic", physics="native")
+    static = env_lib.make_env(**config)
+    mixed = env_lib.HandInteractionEnv(
+        env_config.with_partners(env_lib.EnvConfig(**config), "mixed")
+    )
+    assert mixed.config.partner_model_probability == 0.5 and mixed.config.partner == "recorded"
+    steps = 8
+
+    def rollout(env, key):
+        def step(state, _):
+            state = env.step(state, jnp.zeros(env.action_size))
+            ep = state.info["episode"]
+            return state, (ep.target_pos, ep.goal_points, state.pipeline_state.mocap_pos)
+
+        state = env.reset(key)
+        return state.info["episode"], jax.lax.scan(step, state, None, length=steps)[1]
+
+    keys = jax.random.split(jax.random.PRNGKey(21), 192)
+    first, trace = jax.tree.map(np.asarray, jax.jit(jax.vmap(lambda k: rollout(mixed, k)))(keys))
+    s_first, s_trace = jax.tree.map(
+        np.asarray, jax.jit(jax.vmap(lambda k: rollout(static, k)))(keys)
+    )
+    turned = ~np.all(np.isclose(first.partner_base_rot, s_first.target_rot, atol=1e-6), (1, 2))
+    moves = np.linalg.norm(first.target_velocity, axis=-1) > 0
+    replays = first.partner_replays
+    flags = np.stack([turned, moves, replays], 1).astype(float)
+    n = len(keys)  # binomial SE of a share: 0.036; of the joint shares below: 0.024
+    np.testing.assert_allclose(flags.mean(0), 0.5, atol=0.11)
+    np.testing.assert_allclose((flags.sum(1) == 0).mean(), 0.125, atol=0.075)
+    np.testing.assert_allclose((flags[:, 0] * flags[:, 1]).mean(), 0.25, atol=0.1)
+    assert n == 192 and 0 < (flags.sum(1) == 3).sum()
+    # Speeds of the moving ones come from the range; the others stand still.
+    speed = np.linalg.norm(first.target_velocity, axis=-1)
+    assert speed[moves].max() <= 0.25 + 1e-6 and np.all(speed[~moves] == 0)
+    # An episode of none of them: the static partner's, every step.
+    none = flags.sum(1) == 0
+    for got, want in zip(trace, s_trace, strict=True):
+        np.testing.assert_allclose(got[none], want[none], atol=1e-5)
+    # A replaying partner moves its palm; a held one keeps it, moving only if carried.
+    travelled = np.linalg.norm(trace[0][:, -1] - first.target_pos, axis=-1)
+    assert np.all(travelled[replays & ~moves] > 0) and np.all(travelled[~replays & ~moves] < 1e-6)
+    with pytest.raises(ValueError, match="partner_model_probability 1.5 must be in"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(partner_model_probability=1.5))
 
 
 @HAND_GROUP
