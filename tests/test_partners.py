@@ -448,9 +448,7 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
     from mjx_hands import env_config
 
     nominal = env_lib.EnvConfig(task="et", mocap_source="synthetic", physics="native")
-    robust = dataclasses.replace(
-        env_config.with_partners(nominal, "robust"), action_delay=2
-    )
+    robust = dataclasses.replace(env_config.with_partners(nominal, "robust"), action_delay=2)
     assert robust != nominal
     assert env_config.static_partner(robust) == env_config.static_partner(nominal) == nominal
     # 'static' names one thing everywhere: the static partner, whatever was set before.
@@ -461,7 +459,8 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
         f.name
         for f in dataclasses.fields(env_lib.EnvConfig)
         if f.name.startswith(("target_rotation", "target_orientation", "target_speed"))
-        or f.name in ("target_position_noise", "action_delay", "partner", "partner_model_probability")
+        or f.name
+        in ("target_position_noise", "action_delay", "partner", "partner_model_probability")
     }
     assert documented <= set(env_config.STATIC_PARTNER)
     # One scoring environment for both, so every policy of a program shares its compiles.
@@ -474,7 +473,7 @@ def test_the_mixed_setup_draws_each_partner_model_in_half_the_episodes_independe
     episode that skips all three is the static partner's episode, step for step."""
     from mjx_hands import env_config
 
-    config = dict(task="et", mocap_source="synthetic", physics="native")
+    config = {"task": "et", "mocap_source": "synthetic", "physics": "native"}
     static = env_lib.make_env(**config)
     mixed = env_lib.HandInteractionEnv(
         env_config.with_partners(env_lib.EnvConfig(**config), "mixed")
