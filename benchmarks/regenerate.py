@@ -68,6 +68,7 @@ REPORTS: dict[str, list[str]] = {
         "static=benchmarks/partners/handclap/seed0/static",
         "static-then-robust=benchmarks/partners/handclap/seed0/static_then_robust",
         "static-then-robust-160=benchmarks/partners/clap_pilot/static_then_robust_160",
+        "static-then-mixed=benchmarks/partners/clap_pilot/static_then_mixed",
     ],
     "benchmarks/partners/handclap_velocity": [
         "partner_report",
@@ -81,6 +82,7 @@ REPORTS: dict[str, list[str]] = {
             "partner_report",
             f"static=benchmarks/partners/{task}/seed*/static",
             f"static-then-robust=benchmarks/partners/{task}/seed*/static_then_robust",
+            f"static-then-mixed=benchmarks/partners/{task}/seed*/static_then_mixed",
         ]
         for task in ("et", "handclap", "handshake")
     },

@@ -7,7 +7,8 @@
 # Per seed, on the authors' recordings (it fails without them), with the committed code
 # (a `git archive` of HEAD, as benchmarks/paper/chunks.sh), niced:
 #   1. static: train.py --epochs 60 (384 k env steps on E.T. and the clap);
-#   2. static then robust: a copy of 1 resumed with --partners robust to 100 epochs;
+#   2. static then robust: a copy of 1 resumed with --partners robust to 100 epochs
+#      (PARTNERS=mixed: --partners mixed, archived as static_then_mixed);
 #   3. every robustness sweep (32 episodes a condition, scored against the static partner)
 #      and the naturalness metrics (64 episodes) of both policies.
 # Archived into benchmarks/partners/<task>/seed<k>/{static,static_then_robust}/ and named
@@ -31,19 +32,21 @@ trap 'rm -rf "$snap"' EXIT
 git archive HEAD | tar -x -C "$snap"
 python=${PYTHON:-$root/.venv/bin/python}
 read -ra flags <<< "${FLAGS:-}"
+partners=${PARTNERS:-robust}
+case $partners in robust|mixed) ;; *) echo "PARTNERS=$partners: expected robust or mixed" >&2; exit 2;; esac
 variant=${LABEL:+_$LABEL}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
 
 one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error
-  local seed=$1 static=$runs/$name-static curriculum=$runs/$name-static_then_robust
+  local seed=$1 static=$runs/$name-static curriculum=$runs/$name-static_then_$partners
   rm -rf "$static" "$curriculum" "$runs/$name-sweeps" "$dest.tmp"
   mkdir -p "$runs/$name-sweeps"
   run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" "${flags[@]}" \
     --run-dir "$static" > "$static.log" 2>&1 || return 1
   cp -r "$static" "$curriculum" || return 1
-  run train.py --run-dir "$curriculum" --resume --partners robust --epochs 100 "${flags[@]}" \
+  run train.py --run-dir "$curriculum" --resume --partners "$partners" --epochs 100 "${flags[@]}" \
     > "$curriculum.log" 2>&1 || return 1
-  for setup in static static_then_robust; do
+  for setup in static "static_then_$partners"; do
     local out=$runs/$name-sweeps/$setup
     run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
       > "$out.log" 2>&1 || return 1
