@@ -68,7 +68,7 @@ REPORTS: dict[str, list[str]] = {
         "static=benchmarks/partners/handclap/seed0/static",
         "static-then-robust=benchmarks/partners/handclap/seed0/static_then_robust",
         "static-then-robust-160=benchmarks/partners/clap_pilot/static_then_robust_160",
-        "static-then-mixed=benchmarks/partners/clap_pilot/static_then_mixed",
+        "static-then-mixed=benchmarks/partners/handclap/seed0/static_then_mixed",
     ],
     "benchmarks/partners/handclap_velocity": [
         "partner_report",

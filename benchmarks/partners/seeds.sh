@@ -12,7 +12,10 @@
 #   3. every robustness sweep (32 episodes a condition, scored against the static partner)
 #      and the naturalness metrics (64 episodes) of both policies.
 # Archived into benchmarks/partners/<task>/seed<k>/{static,static_then_robust}/ and named
-# in runs/partners/status; `python -m benchmarks.regenerate` pools the seeds into the
+# in runs/partners/status. A seed already archived is skipped, unless it lacks the
+# PARTNERS stage and its static run is still in the runs folder: then only that stage is
+# trained, swept and archived beside the others (PARTNERS=mixed bash ... et 1 2).
+# `python -m benchmarks.regenerate` pools the seeds into the
 # side-by-side table (benchmarks/partners/<task>/side_by_side.md). RUNS overrides the
 # folder of the run directories. FLAGS adds train.py flags to both stages (e.g. an
 # observation setting both must share) and LABEL names the variant, archived into
@@ -37,39 +40,62 @@ case $partners in robust|mixed) ;; *) echo "PARTNERS=$partners: expected robust 
 variant=${LABEL:+_$LABEL}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
 
+second_stage() {  # seed's static run, resumed against the $partners models
+  local curriculum=$runs/$name-static_then_$partners
+  rm -rf "$curriculum" && cp -rL "$runs/$name-static" "$curriculum" || return 1  # -L: linked runs
+  run train.py --run-dir "$curriculum" --resume --partners "$partners" --epochs 100 "${flags[@]}" \
+    > "$curriculum.log" 2>&1
+}
+
+sweep_into() {  # sweep setup $1 of this seed and copy its record into folder $2
+  local setup=$1 out=$runs/$name-sweeps/$1
+  mkdir -p "$runs/$name-sweeps" "$2"
+  run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
+    > "$out.log" 2>&1 || return 1
+  run -m mjx_hands.naturalness "$runs/$name-$setup" --episodes 64 --out "$out" \
+    >> "$out.log" 2>&1 || return 1
+  cp "$runs/$name-$setup"/{config.json,metrics.csv} "$out"/robustness_*.{json,png} \
+    "$out/naturalness.json" "$2/" || return 1
+  cp "$runs/$name-$setup.log" "$2/train.log" || return 1
+  # Paths relative to the checkout (text files only; none to rewrite is fine).
+  { grep -rlI "$root/" "$2" || true; } | xargs -r sed -i "s#$root/##g"
+}
+
 one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error
-  local seed=$1 static=$runs/$name-static curriculum=$runs/$name-static_then_$partners
-  rm -rf "$static" "$curriculum" "$runs/$name-sweeps" "$dest.tmp"
-  mkdir -p "$runs/$name-sweeps"
+  local seed=$1 static=$runs/$name-static
+  rm -rf "$static" "$runs/$name-sweeps" "$dest.tmp"
   run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" "${flags[@]}" \
     --run-dir "$static" > "$static.log" 2>&1 || return 1
-  cp -r "$static" "$curriculum" || return 1
-  run train.py --run-dir "$curriculum" --resume --partners "$partners" --epochs 100 "${flags[@]}" \
-    > "$curriculum.log" 2>&1 || return 1
+  second_stage || return 1
   for setup in static "static_then_$partners"; do
-    local out=$runs/$name-sweeps/$setup
-    run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
-      > "$out.log" 2>&1 || return 1
-    run -m mjx_hands.naturalness "$runs/$name-$setup" --episodes 64 --out "$out" \
-      >> "$out.log" 2>&1 || return 1
-    mkdir -p "$dest.tmp/$setup"
-    cp "$runs/$name-$setup"/{config.json,metrics.csv} "$out"/robustness_*.{json,png} \
-      "$out/naturalness.json" "$dest.tmp/$setup/" || return 1
-    cp "$runs/$name-$setup.log" "$dest.tmp/$setup/train.log" || return 1
+    sweep_into "$setup" "$dest.tmp/$setup" || return 1
   done
-  # Paths relative to the checkout (text files only; none to rewrite is fine).
-  { grep -rlI "$root/" "$dest.tmp" || true; } | xargs -r sed -i "s#$root/##g"
+}
+
+archive() {  # $1: what finished into folder $2 (or not, status $3)
+  if [ "$3" = 0 ]; then
+    mv "$2.tmp" "$2"
+    echo "$name: $1 done $(date -u +%FT%TZ), archived in $2" >> "$runs/status"
+  else
+    rm -rf "$2.tmp"
+    echo "$name: $1 failed $(date -u +%FT%TZ), see $runs/$name-*.log" >> "$runs/status"
+  fi
 }
 
 for seed in "$@"; do
   name=$task$variant-s$seed
   dest=$root/benchmarks/partners/$task$variant/seed$seed
-  if [ -e "$dest" ]; then echo "$name: $dest exists, skipped" >> "$runs/status"; continue; fi
-  if one_seed "$seed"; then  # a seed is archived whole or not at all
-    mv "$dest.tmp" "$dest"
-    echo "$name: done $(date -u +%FT%TZ), archived in $dest" >> "$runs/status"
+  stage=$dest/static_then_$partners
+  if [ ! -e "$dest" ]; then  # a seed is archived whole or not at all
+    if one_seed "$seed"; then archive "seed $seed" "$dest" 0; else archive "seed $seed" "$dest" 1; fi
+  elif [ ! -e "$stage" ] && [ -d "$runs/$name-static" ]; then
+    # An archived seed whose static run is still here: only the second stage is new.
+    if second_stage && sweep_into "static_then_$partners" "$stage.tmp"; then
+      archive "$partners stage of seed $seed" "$stage" 0
+    else
+      archive "$partners stage of seed $seed" "$stage" 1
+    fi
   else
-    rm -rf "$dest.tmp"
-    echo "$name: failed $(date -u +%FT%TZ), see $runs/$name-*.log" >> "$runs/status"
+    echo "$name: $dest exists, skipped" >> "$runs/status"
   fi
 done
