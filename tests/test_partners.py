@@ -440,6 +440,8 @@ def test_the_robust_setup_is_named_recorded_and_its_flags_still_win(tmp_path):
         json.loads(json.dumps(train_config.config_to_json(parsed)))
     )
     assert back == train_config.resolved(parsed)
+    mixed = train_cli.preset_default(["--partners", "mixed", "--task", "et", "--preset", "cpu"])
+    assert mixed.env == dataclasses.replace(robust.env, partner_model_probability=0.5)
     with pytest.raises(ValueError, match="unknown partners 'wild'"):
         env_config.with_partners(env_lib.EnvConfig(), "wild")
 
