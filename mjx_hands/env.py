@@ -226,6 +226,8 @@ class EpisodeInfo:
     # (3,) the partner's palm as the last observation saw it, sensing error included
     # (``EnvConfig.observe_target_velocity``): its next observed velocity starts here.
     seen_target_pos: jax.Array | None = None
+    # (24,) the policy's previous action (``EnvConfig.action_rate_weight``).
+    last_action: jax.Array | None = None
 
 
 class HandInteractionEnv(Env):
@@ -483,15 +485,17 @@ class HandInteractionEnv(Env):
                 partner_row=row,
                 partner_replays=None if applies["recorded"] is True else applies["recorded"],
             )
+        hold = self.action_for(data.ctrl)  # the set-points of the start pose
         if self.config.action_delay > 0:
-            hold = self.action_for(data.ctrl)  # the set-points of the start pose
             queue = jnp.broadcast_to(hold, (self.config.action_delay,) + hold.shape)
             episode = episode.replace(action_queue=queue)
+        if self.config.action_rate_weight > 0:
+            episode = episode.replace(last_action=hold)
         if self.config.observe_target_velocity:  # observed still at the first step
             episode = episode.replace(seen_target_pos=self.seen_target_pos(episode))
         features = self._features(self.physics.readings(data), episode, data)
         zero = jnp.zeros(())
-        terms = {k: zero for k in rewards.TERMS + ("total",)}
+        terms = {k: zero for k in rewards.TERMS + self._extra_terms() + ("total",)}
         metrics = {f"reward/{k}": v for k, v in terms.items()} | {"success": zero, "diverged": zero}
         metrics |= {f"contact/{name}": zero for name in sh.CONTACT_SENSORS}
         metrics |= {f"pose/{name}": zero for name in POSE_METRICS}
@@ -508,6 +512,10 @@ class HandInteractionEnv(Env):
                 "reward_weights": self.variant,
             },
         )
+
+    def _extra_terms(self) -> tuple[str, ...]:
+        """Reward terms this config adds to the paper's (``rewards.TERMS``)."""
+        return ("action_rate",) if self.config.action_rate_weight > 0 else ()
 
     def _partner_models_apply(self, rng: jax.Array) -> dict[str, jax.Array | bool]:
         """Whether each partner model (orientation, motion, recorded) applies to the
@@ -631,6 +639,12 @@ class HandInteractionEnv(Env):
             contacts=features["contacts"],
             action=action,
         )
+        if episode.last_action is not None:  # smoothness, beside the paper's six terms
+            rate = -self.config.action_rate_weight * jnp.sum(
+                jnp.square(action - episode.last_action)
+            )
+            terms = terms | {"action_rate": rate, "total": terms["total"] + rate}
+            episode = episode.replace(last_action=action)
         success = rewards.success(features["contacts"], p.success_groups).astype(jnp.float32)
 
         finite = readings.finite

@@ -125,6 +125,12 @@ class EnvConfig:
     step. A policy without memory sees only where a moving partner
     was; this tells it where the partner is going. Part of the observation, not a partner
     model: both stages of a curriculum must agree on it."""
+    action_rate_weight: float = 0.0
+    """Weight w of a smoothness term added to the reward, ``-w Σ_i (a_i,t - a_i,t-1)²``
+    over the 24 controls (the first step's previous action: the one that holds the start
+    pose), logged as ``reward/action_rate``. Not one of the paper's six terms: robust
+    stages trade smoothness for contact (palm jerk +50 % on the clap) and this charges
+    it. 0: none (the paper's reward)."""
     partner: Literal[PARTNERS] = "static"
     """Partner model "recorded partner": 'static' (the paper's: the target hand holds one
     pose of its demonstration, drawn per episode between the agent's start and the
@@ -231,9 +237,11 @@ STATIC_PARTNER = {
     "target_position_noise": 0.0,
     "action_delay": 0,
     "partner_model_probability": 1.0,
+    "action_rate_weight": 0.0,
 }
 """The paper's partner: a static hand at its nominal orientation, seen exactly, with
-actions applied at once."""
+actions applied at once; and the paper's reward, without the smoothness term a robust
+stage may add (success is what scoring compares; one scoring env for every policy)."""
 
 
 def partner_models(config: EnvConfig) -> dict[str, object]:
@@ -290,6 +298,8 @@ def config_problems(config: EnvConfig) -> list[str]:
             "observe_target_velocity needs the project observation; the paper profile's is "
             "the authors' (no velocity of the partner)"
         )
+    if not (np.isfinite(config.action_rate_weight) and config.action_rate_weight >= 0):
+        problems.append(f"action_rate_weight {config.action_rate_weight} must be >= 0")
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
     probability = config.partner_model_probability

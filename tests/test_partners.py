@@ -167,6 +167,32 @@ def test_action_delay_applies_each_action_exactly_its_steps_later():
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_position_noise=-0.1))
 
 
+def test_the_action_rate_term_charges_each_change_of_action_and_nothing_else():
+    config = {"task": "et", "mocap_source": "synthetic", "physics": "native"}
+    plain = env_lib.make_env(**config)
+    smooth = env_lib.make_env(**config, action_rate_weight=0.05)
+    actions = np.random.default_rng(3).uniform(-1, 1, (6, smooth.action_size)).astype(np.float32)
+
+    def rewards_of(env, key):
+        def step(state, action):
+            state = env.step(state, action)
+            return state, (state.reward, state.metrics)
+
+        state = env.reset(key)
+        return env.action_for(state.pipeline_state.ctrl), jax.lax.scan(step, state, actions)[1]
+
+    key = jax.random.PRNGKey(4)
+    _, (base, _) = jax.jit(lambda k: rewards_of(plain, k))(key)
+    hold, (reward, metrics) = jax.jit(lambda k: rewards_of(smooth, k))(key)
+    previous = np.concatenate([np.asarray(hold)[None], actions[:-1]])
+    expected = -0.05 * np.sum((actions - previous) ** 2, axis=-1)
+    np.testing.assert_allclose(np.asarray(metrics["reward/action_rate"]), expected, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(reward) - np.asarray(base), expected, rtol=1e-4, atol=1e-5)
+    assert "reward/action_rate" not in plain.reset(key).metrics
+    with pytest.raises(ValueError, match="action_rate_weight -1.0 must be >= 0"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(action_rate_weight=-1.0))
+
+
 def test_the_motion_partner_draws_each_episodes_speed_from_its_range():
     env = env_lib.make_env(
         "et", mocap_source="synthetic", physics="native", target_speed_range=(0.1, 0.3)

@@ -22,6 +22,16 @@
 # benchmarks/partners/<task>_<LABEL>/:
 #
 #   FLAGS=--observe-target-velocity LABEL=velocity nohup bash benchmarks/partners/seeds.sh handclap 0 &
+#
+# STAGE_FLAGS adds flags to the second stage only and STAGE_LABEL names that stage's
+# folder (static_then_<PARTNERS>_<STAGE_LABEL>), beside the seed's other stages:
+#
+#   PARTNERS=mixed STAGE_FLAGS="--action-rate-weight 0.05" STAGE_LABEL=smooth \
+#       nohup bash benchmarks/partners/seeds.sh handclap 0 &
+#
+# A new stage of an archived seed whose static run is gone (a fresh machine) retrains the
+# static run with the same command and goes on only if its evaluations reproduce the
+# archived static run's metrics.csv, so the new stage starts where the archived ones did.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -35,16 +45,37 @@ trap 'rm -rf "$snap"' EXIT
 git archive HEAD | tar -x -C "$snap"
 python=${PYTHON:-$root/.venv/bin/python}
 read -ra flags <<< "${FLAGS:-}"
+read -ra stage_flags <<< "${STAGE_FLAGS:-}"
 partners=${PARTNERS:-robust}
 case $partners in robust|mixed) ;; *) echo "PARTNERS=$partners: expected robust or mixed" >&2; exit 2;; esac
 variant=${LABEL:+_$LABEL}
+stage_name=static_then_$partners${STAGE_LABEL:+_$STAGE_LABEL}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
 
+train_static() {  # seed $1's static stage into $runs/$name-static
+  rm -rf "$runs/$name-static"
+  run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$1" "${flags[@]}" \
+    --run-dir "$runs/$name-static" > "$runs/$name-static.log" 2>&1
+}
+
 second_stage() {  # seed's static run, resumed against the $partners models
-  local curriculum=$runs/$name-static_then_$partners
+  local curriculum=$runs/$name-$stage_name
   rm -rf "$curriculum" && cp -rL "$runs/$name-static" "$curriculum" || return 1  # -L: linked runs
   run train.py --run-dir "$curriculum" --resume --partners "$partners" --epochs 100 "${flags[@]}" \
-    > "$curriculum.log" 2>&1
+    "${stage_flags[@]}" > "$curriculum.log" 2>&1
+}
+
+same_evaluations() {  # whether metrics.csv $1 and $2 hold the same evaluations, epoch by epoch
+  "$python" - "$1" "$2" <<'PY'
+import csv, sys
+def evals(path):
+    with open(path) as f:
+        return [{k: v for k, v in row.items() if k == "epoch" or k.startswith("eval/")}
+                for row in csv.DictReader(f) if row.get("eval/success")]
+a, b = evals(sys.argv[1]), evals(sys.argv[2])
+if a != b:
+    sys.exit(f"{sys.argv[1]}: its evaluations differ from {sys.argv[2]}'s")
+PY
 }
 
 sweep_into() {  # sweep setup $1 of this seed and copy its record into folder $2
@@ -62,12 +93,11 @@ sweep_into() {  # sweep setup $1 of this seed and copy its record into folder $2
 }
 
 one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error
-  local seed=$1 static=$runs/$name-static
-  rm -rf "$static" "$runs/$name-sweeps" "$dest.tmp"
-  run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$seed" "${flags[@]}" \
-    --run-dir "$static" > "$static.log" 2>&1 || return 1
+  local seed=$1
+  rm -rf "$runs/$name-sweeps" "$dest.tmp"
+  train_static "$seed" || return 1
   second_stage || return 1
-  for setup in static "static_then_$partners"; do
+  for setup in static "$stage_name"; do
     sweep_into "$setup" "$dest.tmp/$setup" || return 1
   done
 }
@@ -85,15 +115,21 @@ archive() {  # $1: what finished into folder $2 (or not, status $3)
 for seed in "$@"; do
   name=$task$variant-s$seed
   dest=$root/benchmarks/partners/$task$variant/seed$seed
-  stage=$dest/static_then_$partners
+  stage=$dest/$stage_name
   if [ ! -e "$dest" ]; then  # a seed is archived whole or not at all
     if one_seed "$seed"; then archive "seed $seed" "$dest" 0; else archive "seed $seed" "$dest" 1; fi
-  elif [ ! -e "$stage" ] && [ -d "$runs/$name-static" ]; then
-    # An archived seed whose static run is still here: only the second stage is new.
-    if second_stage && sweep_into "static_then_$partners" "$stage.tmp"; then
-      archive "$partners stage of seed $seed" "$stage" 0
+  elif [ ! -e "$stage" ]; then  # an archived seed: only the second stage is new
+    if [ ! -d "$runs/$name-static" ]; then  # gone with its machine: retrain, as archived
+      if ! { train_static "$seed" && same_evaluations "$runs/$name-static/metrics.csv" \
+               "$dest/static/metrics.csv" 2>> "$runs/$name-static.log"; }; then
+        archive "$stage_name stage of seed $seed (static run retrained)" "$stage" 1
+        continue
+      fi
+    fi
+    if second_stage && sweep_into "$stage_name" "$stage.tmp"; then
+      archive "$stage_name stage of seed $seed" "$stage" 0
     else
-      archive "$partners stage of seed $seed" "$stage" 1
+      archive "$stage_name stage of seed $seed" "$stage" 1
     fi
   else
     echo "$name: $dest exists, skipped" >> "$runs/status"
