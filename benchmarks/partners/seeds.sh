@@ -32,6 +32,8 @@
 # A new stage of an archived seed whose static run is gone (a fresh machine) retrains the
 # static run with the same command and goes on only if its evaluations reproduce the
 # archived static run's metrics.csv, so the new stage starts where the archived ones did.
+# A finished static run already in the runs folder (e.g. a retrained one moved to a
+# LABEL's name) is used as it is, not trained again.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -52,7 +54,13 @@ variant=${LABEL:+_$LABEL}
 stage_name=static_then_$partners${STAGE_LABEL:+_$STAGE_LABEL}
 run() { (cd "$snap" && nice -n 10 "$python" "$@"); }
 
-train_static() {  # seed $1's static stage into $runs/$name-static
+finished_static() {  # whether $runs/$name-static holds a finished 60-epoch static run
+  [ -f "$runs/$name-static/config.json" ] && [ -f "$runs/$name-static/metrics.csv" ] &&
+    tail -n 1 "$runs/$name-static/metrics.csv" | grep -q '^60\.0,'
+}
+
+train_static() {  # seed $1's static stage into $runs/$name-static (a finished one is kept)
+  if finished_static; then echo "$name: static run kept" >> "$runs/status"; return 0; fi
   rm -rf "$runs/$name-static"
   run train.py --task "$task" --mocap-source optitrack --epochs 60 --seed "$1" "${flags[@]}" \
     --run-dir "$runs/$name-static" > "$runs/$name-static.log" 2>&1
