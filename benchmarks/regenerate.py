@@ -10,6 +10,11 @@ regenerates into a temporary folder and compares the text files (``.md``, ``.csv
 ``.json``) with the committed ones; ``tests/test_benchmarks.py`` runs it in CI, so a
 table edited by hand, or records changed without their table, fail the suite. Paths are
 relative to the repository root.
+
+A page quotes a table whole between ``<!-- table: FOLDER/FILE.md -->`` and
+``<!-- end table -->`` lines (``QUOTING``: ``benchmarks/RESULTS.md``, ``README.md``);
+regenerating rewrites each quote from its file, and ``--check`` names a quote that
+differs from it.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import contextlib
 import difflib
 import io
 import os
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -77,6 +83,12 @@ REPORTS: dict[str, list[str]] = {
         "velocity-static=benchmarks/partners/handclap_velocity/seed*/static",
         "velocity-static-then-robust=benchmarks/partners/handclap_velocity/seed*/static_then_robust",
     ],
+    "benchmarks/partners/handclap_smooth": [
+        "partner_report",
+        "static=benchmarks/partners/handclap_smooth/seed*/static",
+        "static-then-mixed=benchmarks/partners/handclap_smooth/seed*/static_then_mixed",
+        "static-then-mixed-smooth=benchmarks/partners/handclap_smooth/seed*/static_then_mixed_smooth",
+    ],
     **{
         f"benchmarks/partners/{task}": [
             "partner_report",
@@ -94,6 +106,32 @@ expand it, and ``LABEL=...*...`` for ``LABEL=`` and them joined by commas (a par
 setup pooled over seeds); a table whose records are not there yet is skipped."""
 
 TEXT_SUFFIXES = (".md", ".csv", ".json")
+QUOTING = ("benchmarks/RESULTS.md", "README.md")
+"""Pages that quote regenerated tables whole."""
+QUOTE = re.compile(r"(<!-- table: (?P<path>\S+) -->\n)(?P<body>.*?)(<!-- end table -->)", re.DOTALL)
+
+
+def with_quotes_renewed(text: str) -> str:
+    """``text`` with every quoted table replaced by its file's current contents."""
+
+    def renew(match: re.Match[str]) -> str:
+        path = ROOT / match["path"]
+        if not path.is_file():
+            raise ValueError(f"a page quotes {match['path']}, which is not a file")
+        return match[1] + path.read_text() + match[4]
+
+    return QUOTE.sub(renew, text)
+
+
+def stale_quotes(page: str) -> list[str]:
+    """The tables that ``page`` (relative to ROOT) quotes differently from their files
+    (or that are no files)."""
+    quotes = QUOTE.finditer((ROOT / page).read_text())
+    return [
+        m["path"]
+        for m in quotes
+        if not (ROOT / m["path"]).is_file() or m["body"] != (ROOT / m["path"]).read_text()
+    ]
 
 
 def expand(command: list[str]) -> list[str]:
@@ -120,9 +158,7 @@ def regenerate(folder: str, out: Path) -> None:
 
     command = expand(REPORTS[folder]) + ["--out", str(out)]
     program, args = (
-        (partner_report, command[1:])
-        if command[0] == "partner_report"
-        else (experiments, command)
+        (partner_report, command[1:]) if command[0] == "partner_report" else (experiments, command)
     )
     printed = io.StringIO()
     with (
@@ -188,6 +224,16 @@ def main(argv: list[str] | None = None) -> int:
         else:
             regenerate(folder, ROOT / folder)
             print(f"{folder}: regenerated")
+    for page in QUOTING:
+        if args.check:
+            stale = stale_quotes(page)
+            print(
+                f"{page}: " + (f"quotes {', '.join(stale)} as it was" if stale else "quotes match")
+            )
+            failed += bool(stale)
+        else:
+            path = ROOT / page
+            path.write_text(with_quotes_renewed(path.read_text()))
     return 1 if failed else 0
 
 

@@ -568,11 +568,58 @@ def write_report(grid_dirs: list[Path], out_dir: Path) -> dict[str, Any]:
             f"{s['verdict_holm']} | {numbers} |"
         )
     (out_dir / "statements.md").write_text("\n".join(lines) + "\n")
+    (out_dir / "fig4.md").write_text(fig4_markdown(summary, judged))
     sides = side_by_side(summary)
     if sides:
         (out_dir / "profiles.json").write_text(json.dumps(sides, indent=2))
         (out_dir / "profiles.md").write_text(side_by_side_markdown(sides))
     return {"summary": summary, "statements": judged, "profiles": sides}
+
+
+def fig4_markdown(summary: list[dict[str, Any]], judged: list[dict[str, Any]]) -> str:
+    """Fig. 4 as two tables: success at the end (mean ± SE, seeds) per profile, task and
+    variant at the last evaluation, and each statement's verdict with its tests' p-values
+    (raw / after Holm's correction) per task; statements a profile cannot test (no
+    baselines trained) are left out."""
+    variants = [v for v in FIG4_VARIANTS if any(r["variant"] == v for r in summary)]
+    variants += sorted({r["variant"] for r in summary} - set(variants))
+    lines = [
+        "| profile | task | env steps | " + " | ".join(variants) + " |",
+        "|---|---|---|" + "---|" * len(variants),
+    ]
+    by_key = {(r["profile"], r["task"], r["variant"]): r for r in summary}
+    for profile, task in dict.fromkeys((r["profile"], r["task"]) for r in summary):
+        rows = [by_key.get((profile, task, v)) for v in variants]
+        steps = max(r["final_env_steps"] for r in rows if r)
+        cells = [
+            f"{r['final_success_end']:.2f} ± {r['final_success_end_se']:.2f} ({r['n_seeds']})"
+            if r
+            else "–"
+            for r in rows
+        ]
+        lines.append(f"| {profile} | {task} | {steps / 1e3:.0f} k | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "| profile | statement | verdict | after Holm's correction | tests: p (p after Holm) |",
+        "|---|---|---|---|---|",
+    ]
+    for s in (s for s in judged if s["verdict"] != "not tested"):
+        tests = "; ".join(_test_cell(t) for t in s["tests"])
+        lines.append(
+            f"| {s['profile']} | {s['statement'].split(' (')[0]} | **{s['verdict']}** | "
+            f"{s['verdict_holm']} | {tests} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _test_cell(test: dict[str, Any]) -> str:
+    """One statement test in a few words: its task, comparison and p-values (or interval)."""
+    if "p" in test:
+        return f"{test['task']} {test['comparison']}: {test['p']:.2g} ({test['p_holm']:.2g})"
+    if "ci95" in test:
+        low, high = test["ci95"]
+        return f"{test['task']} 95 % interval [{low:.2f}, {high:.2f}]"
+    return test.get("why", test.get("verdict", ""))
 
 
 def side_by_side(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -658,7 +705,7 @@ def report_main(argv: list[str]) -> int:
         )
     for s in result["statements"]:
         print(f"[{s['profile']}: {s['verdict']}; Holm: {s['verdict_holm']}] {s['statement']}")
-    print(f"written: {args.out}/fig4.png, summary.csv, summary.json, statements.md")
+    print(f"written: {args.out}/fig4.png, fig4.md, summary.csv, summary.json, statements.md")
     return 0
 
 

@@ -54,7 +54,11 @@ def test_throughput_plot_from_the_recorded_results(tmp_path):
     from benchmarks import plot_throughput
 
     here = Path(plot_throughput.__file__).parent
-    recorded = [here / "results_cpu.json", here / "results_gpu_h200.json", here / "results_gpu_h100.json"]
+    recorded = [
+        here / "results_cpu.json",
+        here / "results_gpu_h200.json",
+        here / "results_gpu_h100.json",
+    ]
     out = tmp_path / "throughput.png"
     plot_throughput.main([*map(str, recorded), "--out", str(out)])
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -164,6 +168,29 @@ def test_every_committed_results_table_equals_its_regeneration_from_records(caps
 
     code = regenerate.main(["--check"])
     assert code == 0, capsys.readouterr().out
+
+
+def test_a_page_quoting_a_table_is_renewed_from_it_and_a_stale_quote_is_named(
+    monkeypatch, tmp_path
+):
+    """A quote between the markers is replaced by its file whole; the prose around it stays;
+    a quote that differs from its file, or of no file, is named by --check's helper."""
+    from benchmarks import regenerate
+
+    monkeypatch.setattr(regenerate, "ROOT", tmp_path)
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "table.md").write_text("| a |\n|---|\n| 2 |\n")
+    page = "before\n<!-- table: t/table.md -->\n| a |\n|---|\n| 1 |\n<!-- end table -->\nafter\n"
+    (tmp_path / "page.md").write_text(page)
+    assert regenerate.stale_quotes("page.md") == ["t/table.md"]
+    renewed = regenerate.with_quotes_renewed(page)
+    assert renewed == page.replace("| 1 |", "| 2 |")
+    (tmp_path / "page.md").write_text(
+        renewed + "<!-- table: t/gone.md -->\nx\n<!-- end table -->\n"
+    )
+    assert regenerate.stale_quotes("page.md") == ["t/gone.md"]
+    with pytest.raises(ValueError, match="t/gone.md, which is not a file"):
+        regenerate.with_quotes_renewed((tmp_path / "page.md").read_text())
 
 
 def test_contact_hold_counts_the_steps_in_contact_after_the_first_and_the_changes():

@@ -289,6 +289,18 @@ def test_report_sets_the_paper_profile_beside_the_project_profile(tmp_path):
     assert rows["full"]["p"] == pytest.approx(expected)
     table = (tmp_path / "report" / "profiles.md").read_text()
     assert "| et | full | 0.60 ± 0.06 (n=3, 2 k steps) | 0.95 ± 0.03 (n=3, 2 k steps) | +0.35 |" in table
+    # fig4.md: one row per profile and task, the variants the grids hold, "-" for the rest
+    # (0.1 / sqrt(3) = 0.058, 0.1 / sqrt(3) = 0.058 for paper; 0.05 / sqrt(3) = 0.029 for
+    # the project's full, 0 for its constant no_imitation).
+    fig4 = (tmp_path / "report" / "fig4.md").read_text().splitlines()
+    assert fig4[0] == "| profile | task | env steps | full | no_imitation |"
+    assert "| paper | et | 2 k | 0.60 ± 0.06 (3) | 0.50 ± 0.06 (3) |" in fig4
+    assert "| project | et | 2 k | 0.95 ± 0.03 (3) | 0.90 ± 0.00 (3) |" in fig4
+    # Only statement 4 is testable without baselines: one row per profile, its p-value.
+    statement_rows = [line for line in fig4 if line.startswith("| paper | 4.")]
+    p4 = stats.ttest_ind([0.5, 0.7, 0.6], [0.4, 0.5, 0.6], equal_var=False).pvalue
+    assert len(statement_rows) == 1 and f"et full vs no_imitation: {p4:.2g}" in statement_rows[0]
+    assert not any(line.startswith("| paper | 1.") for line in fig4)  # not tested: left out
 
 
 def test_curves_average_seeds_at_shared_evaluations(tmp_path):
