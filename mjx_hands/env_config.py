@@ -131,7 +131,7 @@ class EnvConfig:
     pose), logged as ``reward/action_rate``. Not one of the paper's six terms: robust
     stages trade smoothness for contact (palm jerk +50 % on the clap) and this charges
     it. The previous action is not observed, so the term is only partly predictable from
-    the observation (the arm's joint velocities carry most of it); adding it to the
+    the observation (the joints lag their set-points, so positions and velocities carry part of it); adding it to the
     observation would change the observation size between a curriculum's stages. 0: none
     (the paper's reward)."""
     partner: Literal[PARTNERS] = "static"
