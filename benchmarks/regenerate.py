@@ -89,6 +89,12 @@ REPORTS: dict[str, list[str]] = {
         "static-then-mixed=benchmarks/partners/handclap_smooth/seed*/static_then_mixed",
         "static-then-mixed-smooth=benchmarks/partners/handclap_smooth/seed*/static_then_mixed_smooth",
     ],
+    "benchmarks/partners/et_mixed": [
+        "partner_report",
+        "static=benchmarks/partners/et_mixed/seed*/static",
+        "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
+        "static-then-robust=benchmarks/partners/et/seed0/static_then_robust",
+    ],
     **{
         f"benchmarks/partners/{task}": [
             "partner_report",
