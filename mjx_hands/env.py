@@ -21,7 +21,8 @@ Episode randomisation (the paper's training method):
   backs away from the target's along the line between the palm centres instead, at
   most ``start_retreats`` moves in all (``_separated_start``).
 
-Observation (``observation_size`` = 145, 148 with ``observe_target_velocity``), in this order:
+Observation (``observation_size`` = 145, + 3 with ``observe_target_velocity``, + 24 K with
+``observe_recent_actions`` = K), in this order:
 
 ====================  ====  ================================================
 agent qpos            28    arm (4) + hand joints (24), radians
@@ -34,6 +35,8 @@ target points         18    target palm + fingertips minus agent palm centre
 phase                  2    step / episode length, imitation-active flag
 target velocity        3    with ``observe_target_velocity`` only: the partner's
                             palm, m/s, world axes, from its observed positions
+recent actions       24 K   with ``observe_recent_actions`` = K only: the policy's
+                            last K actions in [-1, 1], most recent first
 ====================  ====  ================================================
 
 That is the project profile's. The paper profile (``EnvConfig.profile = "paper"``,
@@ -211,8 +214,14 @@ class EpisodeInfo:
     goal_points: jax.Array  # (6, 3) goal palm + fingertips, world
     # (3,) m/s of the moving target (``EnvConfig.target_speed``); None: a static target.
     target_velocity: jax.Array | None = None
-    # (delay, 24) actions not yet applied, oldest first (``EnvConfig.action_delay``).
+    # (delay, 24) actions not yet applied, oldest first (``EnvConfig.action_delay``; the
+    # longest of ``action_delay_range``).
     action_queue: jax.Array | None = None
+    # () this episode's delay, control steps (``EnvConfig.action_delay_range``); None: the
+    # queue's length.
+    action_delay: jax.Array | None = None
+    # (K, 24) the policy's last K actions, most recent first (``observe_recent_actions``).
+    recent_actions: jax.Array | None = None
     # The recorded partner (``EnvConfig.partner``): its palm pose at the closest
     # approach as placed (3,), (3, 3), (4,), and the row of the partner tables at step 0.
     partner_base_pos: jax.Array | None = None
@@ -486,9 +495,18 @@ class HandInteractionEnv(Env):
                 partner_replays=None if applies["recorded"] is True else applies["recorded"],
             )
         hold = self.action_for(data.ctrl)  # the set-points of the start pose
-        if self.config.action_delay > 0:
-            queue = jnp.broadcast_to(hold, (self.config.action_delay,) + hold.shape)
+        delays = self.config.action_delay_range
+        longest = self.config.action_delay if delays is None else delays[1]
+        if longest > 0:
+            queue = jnp.broadcast_to(hold, (longest,) + hold.shape)
             episode = episode.replace(action_queue=queue)
+        if delays is not None:
+            key = jax.random.fold_in(k_motion, 5)
+            delay = jax.random.randint(key, (), delays[0], delays[1] + 1)
+            episode = episode.replace(action_delay=delay)
+        if self.config.observe_recent_actions:
+            recent = jnp.broadcast_to(hold, (self.config.observe_recent_actions,) + hold.shape)
+            episode = episode.replace(recent_actions=recent)
         if self.config.action_rate_weight > 0:
             episode = episode.replace(last_action=hold)
         if self.config.observe_target_velocity:  # observed still at the first step
@@ -618,10 +636,16 @@ class HandInteractionEnv(Env):
         action = jnp.clip(action, -1.0, 1.0)
         data, episode = self._advance_partner(state.pipeline_state, state.info["episode"])
         applied = action
-        if episode.action_queue is not None:  # the oldest waiting action, then queue this one
+        if episode.action_queue is not None:  # the action of `delay` steps ago; queue this one
             queue = episode.action_queue
             applied = queue[0]
+            if episode.action_delay is not None:  # this episode's delay, <= the queue's length
+                waited = queue[queue.shape[0] - jnp.maximum(episode.action_delay, 1)]
+                applied = jnp.where(episode.action_delay > 0, waited, action)
             episode = episode.replace(action_queue=jnp.concatenate([queue[1:], action[None]]))
+        if episode.recent_actions is not None:
+            recent = jnp.concatenate([action[None], episode.recent_actions[:-1]])
+            episode = episode.replace(recent_actions=recent)
         data = self.physics.step(data, self.ctrl_for(applied))
         readings = self.physics.readings(data)
         episode = episode.replace(step=episode.step + 1)
@@ -942,7 +966,11 @@ class HandInteractionEnv(Env):
             (episode.target_points - f["points"][0]).reshape(-1),
             phase,
         ]
-        return jnp.concatenate(parts if velocity is None else [*parts, velocity])
+        if velocity is not None:
+            parts.append(velocity)
+        if episode.recent_actions is not None:
+            parts.append(episode.recent_actions.reshape(-1))
+        return jnp.concatenate(parts)
 
 
 def _rot_to_quat(rot: np.ndarray) -> np.ndarray:

@@ -117,6 +117,19 @@ class EnvConfig:
     actuators receiving it (a robot controller's latency); the first steps of an episode
     apply the action that holds the start pose. The reward's action term charges the
     policy's own action. 0: none."""
+    action_delay_range: tuple[int, int] | None = None
+    """Partner model "actuation" drawn per episode: the delay (control steps) uniformly
+    from the whole numbers [low, high], replacing ``action_delay`` (give one), so that
+    a policy trained with it meets every latency of a controller it may run on. None:
+    ``action_delay``. A policy without memory cannot tell which of its actions still
+    wait: train it with ``observe_recent_actions`` >= high."""
+    observe_recent_actions: int = 0
+    """Observe the policy's own last K actions too (24 each, most recent first; the
+    start pose's holding action before the first step; the project observation only).
+    With an action delay of d <= K steps they hold every action still waiting for the
+    actuators, which makes the delayed problem Markov again (the augmented state of a
+    delayed MDP). Part of the observation, not a partner model: both stages of a
+    curriculum must agree on it. 0: none."""
     observe_target_velocity: bool = False
     """Observe the partner's palm velocity too (m/s, world axes; the project observation
     only): the difference of its last two observed positions over the control period,
@@ -239,6 +252,7 @@ STATIC_PARTNER = {
     "target_speed_range": None,
     "target_position_noise": 0.0,
     "action_delay": 0,
+    "action_delay_range": None,
     "partner_model_probability": 1.0,
     "action_rate_weight": 0.0,
 }
@@ -305,6 +319,27 @@ def config_problems(config: EnvConfig) -> list[str]:
         problems.append(f"action_rate_weight {config.action_rate_weight} must be >= 0")
     if not (isinstance(config.action_delay, int) and config.action_delay >= 0):
         problems.append(f"action_delay {config.action_delay!r} must be a whole number >= 0")
+    delays = config.action_delay_range
+    if delays is not None:
+        if not (
+            len(delays) == 2
+            and all(isinstance(v, int) and v >= 0 for v in delays)
+            and delays[0] <= delays[1]
+        ):
+            problems.append(
+                f"action_delay_range {delays} must be [low, high] whole control steps, "
+                "0 <= low <= high"
+            )
+        if config.action_delay:
+            problems.append("action_delay and action_delay_range both delay actions: give one")
+    recent = config.observe_recent_actions
+    if not (isinstance(recent, int) and recent >= 0):
+        problems.append(f"observe_recent_actions {recent!r} must be a whole number >= 0")
+    elif recent and profiles.env_profile(config.profile).observation == "paper":
+        problems.append(
+            "observe_recent_actions needs the project observation; the paper profile's is "
+            "the authors' (no actions)"
+        )
     probability = config.partner_model_probability
     if not (np.isfinite(probability) and 0 <= probability <= 1):
         problems.append(f"partner_model_probability {probability} must be in [0, 1]")

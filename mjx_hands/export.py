@@ -90,6 +90,10 @@ def observation_layout(single) -> list[dict[str, Any]]:
         if single.config.observe_target_velocity:
             parts.append(("target_velocity", 3, "m/s, world axes",
                           "observed target palm minus the last step's, over the control period"))
+        if single.config.observe_recent_actions:
+            k = single.config.observe_recent_actions
+            meaning = f"the policy's last {k} actions, most recent first (the start pose's before)"
+            parts.append(("recent_actions", k * single.action_size, "1, in [-1, 1]", meaning))
     layout = [dict(zip(("name", "size", "units", "meaning"), p)) for p in parts]
     total = sum(p["size"] for p in layout)
     if total != single.observation_size:
@@ -106,6 +110,12 @@ def episode_arrays(single, policy, keys: jax.Array) -> tuple[dict[str, np.ndarra
     queue = episode.action_queue
     if queue is None:
         queue = np.zeros((len(keys), 0, single.action_size), np.float32)
+    delay = episode.action_delay  # per episode where drawn, else the queue's length
+    if delay is None:
+        delay = np.full(len(keys), queue.shape[1])
+    recent = episode.recent_actions
+    if recent is None:
+        recent = np.zeros((len(keys), 0, single.action_size), np.float32)
     arrays = {
         "time": np.asarray(data.time, np.float32),
         "qpos": np.asarray(data.qpos, np.float32),
@@ -113,6 +123,8 @@ def episode_arrays(single, policy, keys: jax.Array) -> tuple[dict[str, np.ndarra
         "ctrl": np.asarray(data.ctrl, np.float32),
         "mocap_quat": np.asarray(data.mocap_quat, np.float32),
         "action_queue": np.asarray(queue, np.float32),
+        "action_delay": np.asarray(delay, np.int32),
+        "recent_actions": np.asarray(recent, np.float32),
         "success_groups": np.asarray(single.params.success_groups)[np.asarray(episode.demo)],
     }
     arrays |= {f"partner/{k}": np.asarray(v, np.float32) for k, v in schedule.items()}
@@ -197,6 +209,8 @@ def export(args: ExportArgs, out=sys.stdout) -> dict[str, Any]:
             "substeps": single.n_substeps,
             "episode_length": single.episode_length,
             "action_delay": single.config.action_delay,
+            "action_delay_range": single.config.action_delay_range,
+            "observe_recent_actions": single.config.observe_recent_actions,
             "sensordata": {
                 name: [getattr(layout, name).start, getattr(layout, name).stop]
                 for name in ("points", "contacts", "touch")

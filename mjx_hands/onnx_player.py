@@ -88,8 +88,10 @@ class Player:
         return {"points": sensordata[s["points"]].reshape(-1, 3), "contacts": contacts.astype(F32)}
 
     # -------------------------------------------------------------- observation
-    def observation(self, k: int, qpos, qvel, readings, partner: dict) -> np.ndarray:
-        """The observation (n,) float32 at control step ``k`` (``policy.json``'s layout)."""
+    def observation(self, k: int, qpos, qvel, readings, partner: dict, recent=None) -> np.ndarray:
+        """The observation (n,) float32 at control step ``k`` (``policy.json``'s layout);
+        ``recent``: the policy's last actions (K, 24), most recent first, where it observes
+        them."""
         at = {name: values[k] for name, values in partner.items()}
         points, contacts = readings["points"], readings["contacts"]
         if self.env["observation"] == "paper":
@@ -111,6 +113,8 @@ class Player:
                 seen = partner["target_pos"]
                 step = seen[k] - seen[k - 1] if k > 0 else np.zeros(3, F32)
                 parts.append(np.asarray(step, F32) / F32(self.env["control_dt"]))
+            if self.env.get("observe_recent_actions"):
+                parts.append(recent)
         return np.concatenate([np.asarray(p, F32).reshape(-1) for p in parts])
 
     def act(self, observation: np.ndarray) -> np.ndarray:
@@ -134,22 +138,25 @@ class Player:
         # The start's readings: the sensors of one step from the pose (its motion dropped).
         *_, sensordata = self._run(state, e["ctrl"], mocap(0), 1)
         readings = self._readings(sensordata)
-        obs = self.observation(0, e["qpos"], e["qvel"], readings, partner)
-        queue = list(e["action_queue"])  # actions not yet applied (action delay)
+        recent = list(e.get("recent_actions", ()))  # the policy's last actions, newest first
+        obs = self.observation(0, e["qpos"], e["qvel"], readings, partner, recent)
+        queue = list(e["action_queue"])  # actions not yet applied, oldest first (action delay)
+        delay = int(e["action_delay"]) if "action_delay" in e else len(queue)
         observations, actions = [obs], []
         for k in range(1, length + 1):
             action = self.act(obs)
             applied = action
             if queue:
-                applied = queue.pop(0)
-                queue.append(action)
+                applied = queue[len(queue) - delay] if delay > 0 else action
+                queue = queue[1:] + [action]
+            recent = ([action] + recent)[: len(recent)]
             ctrl = self.ctrl_lo + F32(0.5) * (applied + F32(1.0)) * (self.ctrl_hi - self.ctrl_lo)
             time, qpos, qvel, sensordata = self._run(state, ctrl, mocap(k), substeps)
             if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
                 return {"success": False, "diverged": True, "steps": k}
             state = state | {"time": time, "qpos": qpos, "qvel": qvel}
             readings = self._readings(sensordata)
-            obs = self.observation(k, qpos, qvel, readings, partner)
+            obs = self.observation(k, qpos, qvel, readings, partner, recent)
             observations.append(obs)
             actions.append(action)
             if frames is not None:

@@ -167,6 +167,46 @@ def test_action_delay_applies_each_action_exactly_its_steps_later():
         env_lib.HandInteractionEnv(env_lib.EnvConfig(target_position_noise=-0.1))
 
 
+def test_a_drawn_action_delay_applies_each_episode_its_own_and_the_recent_actions_are_seen():
+    """Delays drawn per episode from [0, 2]: uniform shares, and in each episode every
+    action reaches the actuators exactly its episode's steps later (the start pose held
+    before); the observation's last 48 entries are the policy's last 2 actions."""
+    env = env_lib.make_env(
+        "et", mocap_source="synthetic", physics="native",
+        action_delay_range=(0, 2), observe_recent_actions=2,
+    )
+    plain = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    assert env.observation_size == plain.observation_size + 2 * 24
+    draws = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(5), 600))
+    delays = np.asarray(draws.info["episode"].action_delay)
+    np.testing.assert_allclose(np.bincount(delays, minlength=3) / 600, 1 / 3, atol=0.06)
+    # Six episodes, at least one of each delay.
+    picks = np.concatenate([np.flatnonzero(delays == d)[:2] for d in range(3)])
+    state = jax.tree.map(lambda x: x[picks], draws)
+    hold = np.asarray(state.pipeline_state.ctrl)  # (6, 24)
+    hold_action = np.asarray(jax.vmap(env.action_for)(state.pipeline_state.ctrl))
+    np.testing.assert_allclose(np.asarray(state.obs)[:, -48:], np.tile(hold_action, 2), atol=1e-6)
+    step = jax.jit(jax.vmap(env.step))
+    actions = np.random.default_rng(1).uniform(-1, 1, (5, 6, 24)).astype(np.float32)
+    applied, seen = [], []
+    for action in actions:
+        state = step(state, jnp.asarray(action))
+        applied.append(np.asarray(state.pipeline_state.ctrl))
+        seen.append(np.asarray(state.obs)[:, -48:].reshape(6, 2, 24))
+    for e, delay in enumerate(delays[picks]):
+        for k in range(5):
+            expected = hold[e] if k < delay else np.asarray(env.ctrl_for(actions[k - delay, e]))
+            np.testing.assert_allclose(applied[k][e], expected, atol=1e-6)
+            newest_first = [actions[k, e], actions[k - 1, e] if k else hold_action[e]]
+            np.testing.assert_allclose(seen[k][e], np.stack(newest_first), atol=1e-6)
+    with pytest.raises(ValueError, match=r"action_delay_range \(2, 1\) must be \[low, high\]"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(action_delay_range=(2, 1)))
+    with pytest.raises(ValueError, match="action_delay and action_delay_range both"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(action_delay=1, action_delay_range=(0, 2)))
+    with pytest.raises(ValueError, match="observe_recent_actions needs the project observation"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(profile="paper", observe_recent_actions=1))
+
+
 def test_the_action_rate_term_charges_each_change_of_action_and_nothing_else():
     config = {"task": "et", "mocap_source": "synthetic", "physics": "native"}
     plain = env_lib.make_env(**config)
@@ -488,7 +528,13 @@ def test_policies_are_scored_against_the_static_partner_whatever_they_trained_wi
         for f in dataclasses.fields(env_lib.EnvConfig)
         if f.name.startswith(("target_rotation", "target_orientation", "target_speed"))
         or f.name
-        in ("target_position_noise", "action_delay", "partner", "partner_model_probability")
+        in (
+            "target_position_noise",
+            "action_delay",
+            "action_delay_range",
+            "partner",
+            "partner_model_probability",
+        )
     }
     assert documented <= set(env_config.STATIC_PARTNER)
     # One scoring environment for both, so every policy of a program shares its compiles.
@@ -573,3 +619,42 @@ def test_a_curriculum_stage_resumes_a_run_against_the_robust_partners(tmp_path, 
     assert train_cli.main(argv) == 0
     config = json.loads((run / "config.json").read_text())
     assert config["env"]["partner"] == "static" and config["env"]["target_speed_range"] is None
+
+
+def test_the_exported_player_delays_and_observes_actions_as_the_environment_does(
+    tmp_path, monkeypatch
+):
+    """A policy that observes its last 2 actions, under delays drawn from [0, 2]: the
+    native-MuJoCo player (ONNX, no JAX) applies each episode's delay and builds the very
+    observations the environment does, step after step."""
+    from mjx_hands import export, onnx_player, policies, rollouts
+
+    env_config = env_lib.EnvConfig(
+        task="et", mocap_source="synthetic", physics="native",
+        action_delay_range=(0, 2), observe_recent_actions=2,
+    )  # fmt: skip
+    single = env_lib.HandInteractionEnv(env_config)
+    weights = jnp.asarray(
+        np.random.default_rng(3).normal(0, 0.3, (single.observation_size, 24)), jnp.float32
+    )
+
+    def act(obs):  # a deterministic policy whose actions follow what it observes
+        return jnp.tanh(obs @ weights)
+
+    config = train_config.preset("cpu", env=env_config)
+    loaded = policies.LoadedPolicy(act, None, config, single, 0)
+    monkeypatch.setattr(policies, "load_policy", lambda *args, **kwargs: loaded)
+    onnx_file = tmp_path / "policy.onnx"
+    assert export.main([str(tmp_path), "--onnx", str(onnx_file), "--episodes", "6"]) == 0
+    record = json.loads((tmp_path / "policy.json").read_text())
+    assert record["observation"][-1]["name"] == "recent_actions"
+    assert record["environment"]["action_delay_range"] == [0, 2]
+    keys = rollouts.episode_keys(rollouts.EVAL_SEED, 6)
+    trajectory = rollouts.rollout(single, act, keys, extra=lambda s: {"obs": s.obs})
+    player = onnx_player.Player(tmp_path)
+    delays = player.episodes["action_delay"]
+    assert set(delays.tolist()) > {0}, delays  # the premise: some episode is delayed
+    for i in range(6):
+        np.testing.assert_allclose(
+            player.play(i)["observations"], trajectory["obs"][:, i], atol=1e-4
+        )
