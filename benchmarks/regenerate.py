@@ -93,7 +93,15 @@ REPORTS: dict[str, list[str]] = {
         "partner_report",
         "static=benchmarks/partners/et_mixed/seed*/static",
         "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
-        "static-then-robust=benchmarks/partners/et/seed0/static_then_robust",
+        "static-then-robust=benchmarks/partners/et/seed*/static_then_robust",
+    ],
+    "benchmarks/partners/et_delay": [
+        "partner_report",
+        "static=benchmarks/partners/et_mixed/seed*/static",
+        "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
+        "actions-static=benchmarks/partners/et_delay/seed*/static",
+        "actions-static-then-mixed=benchmarks/partners/et_delay/seed*/static_then_mixed",
+        "actions-static-then-mixed-delay=benchmarks/partners/et_delay/seed*/static_then_mixed_delay",
     ],
     **{
         f"benchmarks/partners/{task}": [

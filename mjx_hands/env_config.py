@@ -143,10 +143,10 @@ class EnvConfig:
     over the 24 controls (the first step's previous action: the one that holds the start
     pose), logged as ``reward/action_rate``. Not one of the paper's six terms: robust
     stages trade smoothness for contact (palm jerk +50 % on the clap) and this charges
-    it. The previous action is not observed, so the term is only partly predictable
-    from the observation (the joints lag their set-points: their positions and velocities
-    carry part of it); observing it would change the observation's size between a
-    curriculum's stages. 0: none (the paper's reward)."""
+    it. Unless ``observe_recent_actions`` shows it, the previous action is not observed,
+    so the term is only partly predictable from the observation (the joints lag their
+    set-points: their positions and velocities carry part of it). 0: none (the paper's
+    reward)."""
     partner: Literal[PARTNERS] = "static"
     """Partner model "recorded partner": 'static' (the paper's: the target hand holds one
     pose of its demonstration, drawn per episode between the agent's start and the

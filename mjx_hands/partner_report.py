@@ -18,8 +18,9 @@ metrics (lower is closer to the demonstrations); last, where the folders hold th
 metrics.csv, the training minutes to success at the end of 0.9 in the run's own
 evaluations (against its own training partners). A run that resumed another setup's run
 trained against other partners (the same first rows, other ``partners`` in config.json:
-static then robust) counts from that run's start, and reaches the mark only in
-evaluations after it; without the other setup's metrics.csv it counts from its start. Values are mean +- standard error over the setup's
+static then robust; or its sibling folder ``static``, as ``benchmarks/partners/seeds.sh``
+archives a seed) counts from that run's start, and reaches the mark only in
+evaluations after it; without the other run's metrics.csv it counts from its start. Values are mean +- standard error over the setup's
 runs (one run: the binomial error over its episodes; one policy's naturalness, or one
 run's minutes: "(n = 1)").
 """
@@ -190,17 +191,27 @@ def training_minutes(setups: dict[str, Folders]) -> dict[str, list[float | None]
     """{label: per-run minutes to the mark (None: not reached)} of the setups whose every
     folder holds a metrics.csv; a run's stage starts after the other setups' runs it
     resumed against other partners (:func:`stage_start`)."""
-    runs = {
-        label: [read_run(f) for f in folders]
-        for label, folders in setups.items()
-        if all((f / "metrics.csv").is_file() for f in folders)
+    folders = {
+        label: list(fs) for label, fs in setups.items() if all((f / "metrics.csv").is_file() for f in fs)
     }
+    runs = {label: [read_run(f) for f in fs] for label, fs in folders.items()}
+
+    def starts(label: str, folder: Path) -> list[Run]:
+        """The runs ``folder``'s run may have resumed: the other setups' and its sibling
+        static run (``benchmarks/partners/seeds.sh``'s layout), where that is not in the
+        table."""
+        others = [o for k, rs in runs.items() if k != label for o in rs]
+        sibling = folder.parent / "static"
+        if sibling != folder and (sibling / "metrics.csv").is_file():
+            others.append(read_run(sibling))
+        return others
+
     return {
         label: [
-            minutes_to_mark(run[0], stage_start(run, [o for k, rs in runs.items() if k != label for o in rs]))
-            for run in mine
+            minutes_to_mark(run[0], stage_start(run, starts(label, folder)))
+            for run, folder in zip(runs[label], folders[label])
         ]
-        for label, mine in runs.items()
+        for label in runs
     }
 
 

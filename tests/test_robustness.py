@@ -287,3 +287,11 @@ def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_re
     np.testing.assert_allclose(row["longer"][:2], [10.5, 1.5])
     text = (tmp_path / "out" / "side_by_side.md").read_text()
     assert f"| {partner_report.TRAINING_ROW} | 3.5 ± 0.5 | 9.0 (n = 1); 1 of 2 reached it |" in text
+    # Without the static column the curriculum still counts from its sibling static run's
+    # end (the seeds' folder layout), not from the static stage's 0.9.
+    alone = [f"curriculum={','.join(seeds['curriculum'])}", "--out", str(tmp_path / "alone")]
+    assert partner_report.main(alone) == 0
+    rows = json.loads((tmp_path / "alone" / "side_by_side.json").read_text())["rows"]
+    assert {r["condition"]: r for r in rows}[partner_report.TRAINING_ROW]["curriculum"] == [
+        9.0, None, 1, 2,
+    ]  # fmt: skip
