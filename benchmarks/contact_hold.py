@@ -12,17 +12,26 @@ seed for every policy and speed). "In contact" is the task's success condition (
 required sensor group touching at once) at a control step. A policy that reaches
 contact and holds it has one change (the start of contact) and a share near 1; one that
 touches and lets go, again and again, has many.
+
+``--lead N ...`` also scores each policy with a privileged feed-forward beside it: every
+step the policy's arm and wrist set-points move by the joint displacement (IK) that
+carries the palm as far as the partner will move in N control steps at its true
+velocity, which nothing learned observes (a turn of the partner stays unforeseen; 0:
+the policy alone, through the same code). Where even that does not hold contact,
+prediction is not what the policies lack.
 """
 
 from __future__ import annotations
 
 import argparse
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import machine
 from mjx_hands import env as env_lib
-from mjx_hands import policies, robustness, rollouts
+from mjx_hands import ik, policies, robustness, rollouts
 
 
 def hold_statistics(success: np.ndarray) -> dict[str, float]:
@@ -41,8 +50,49 @@ def hold_statistics(success: np.ndarray) -> dict[str, float]:
     }
 
 
-def measure(run_dir: str, speeds: list[float], episodes: int, seed: int) -> dict:
-    """{speed: hold statistics} of one run's policy."""
+def lead_step(env, act, lead_steps: int, ik_iterations: int = 10):
+    """(state) -> state, one control step of a single env: the policy's action, its arm
+    and wrist set-points moved by the joint displacement (IK) that carries the palm as far
+    as the partner will move in ``lead_steps`` control steps at its true velocity."""
+    chain = env.chain
+    arm = np.flatnonzero(np.isin(env.actuated_qadr, chain.qpos_adr))  # arm + wrist actuators
+    # Each of those actuators' joint in the chain.
+    joint_of = np.array([list(chain.qpos_adr).index(env.actuated_qadr[i]) for i in arm])
+    lead = jnp.float32(lead_steps * env.config.control_dt)
+
+    def step(state):
+        action = act(state.obs)
+        if not lead_steps:
+            return env.step(state, action)
+        episode = state.info["episode"]
+        joints = state.pipeline_state.qpos[chain.qpos_adr]
+        palm_pos, palm_rot = ik.forward(chain, joints)
+        # The same solver to both poses, so that its limits and residuals cancel.
+        solve = lambda goal: ik.solve(chain, goal, palm_rot, joints, ik_iterations)
+        shift = solve(palm_pos + lead * episode.target_velocity) - solve(palm_pos)
+        setpoints = env.ctrl_for(action).at[arm].add(shift[joint_of])
+        return env.step(state, env.action_for(setpoints))
+
+    return step
+
+
+def led_success(env, act, reset, keys, reset_args, lead_steps: int) -> np.ndarray:
+    """(T, n) bool: the task's success condition per step, the policy's arm led by
+    :func:`lead_step`."""
+    state = jax.jit(reset)(keys, *reset_args)
+    step = jax.jit(jax.vmap(lead_step(env, act, lead_steps)))
+    success = []
+    for _ in range(env.episode_length):
+        state = step(state)
+        success.append(np.asarray(state.info["success"]) > 0.5)
+    return np.stack(success)
+
+
+def measure(
+    run_dir: str, speeds: list[float], episodes: int, seed: int, leads: list[int] = ()
+) -> dict:
+    """{speed: hold statistics} of one run's policy, and {"lead N": {speed: ...}} of it
+    with its arm led N steps ahead of the partner (``leads``)."""
     loaded = policies.load_policy(run_dir, eval_envs=episodes)
     scoring = env_lib.scoring_env(loaded.single.config)
     sweep = robustness.RobustnessArgs  # the motion sweep's own turns and box
@@ -50,14 +100,16 @@ def measure(run_dir: str, speeds: list[float], episodes: int, seed: int) -> dict
     reset = robustness.sweep_reset(moving, moving=True)
     keys = rollouts.episode_keys(seed, episodes)
     tilts = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (episodes, 1))
-    out = {}
+    out, tracked = {}, {f"lead {n}": {} for n in leads}
     for speed in speeds:
-        trajectory = rollouts.rollout(
-            moving, loaded.act, keys, reset=reset,
-            reset_args=(tilts, np.full(episodes, speed, np.float32)),
-        )  # fmt: skip
+        reset_args = (tilts, np.full(episodes, speed, np.float32))
+        trajectory = rollouts.rollout(moving, loaded.act, keys, reset=reset, reset_args=reset_args)
         out[f"{speed:g}"] = hold_statistics(trajectory["success"] > 0.5)
-    return {"task": loaded.config.env.task, "run_dir": run_dir, "speeds": out}
+        for n in leads:
+            success = led_success(moving, loaded.act, reset, keys, reset_args, n)
+            tracked[f"lead {n}"][f"{speed:g}"] = hold_statistics(success)
+    record = {"task": loaded.config.env.task, "run_dir": run_dir, "speeds": out}
+    return record | ({"led": tracked} if leads else {})
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -68,17 +120,29 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--speeds", type=float, nargs="+", default=[0.0, 0.2], help="m/s")
     parser.add_argument("--episodes", type=int, default=32)
     parser.add_argument("--seed", type=int, default=rollouts.EVAL_SEED)
+    parser.add_argument(
+        "--lead", type=int, nargs="*", default=[],
+        help="also score each policy with its arm led this many control steps ahead of "
+        "the partner's true motion (several: one each; 0: the policy alone)",
+    )  # fmt: skip
     parser.add_argument("--out")
     args = parser.parse_args(argv)
+    if any(n < 0 for n in args.lead):
+        parser.error(f"--lead {args.lead}: control steps must be >= 0")
     runs = {}
     for spec in args.runs:
         label, sep, run_dir = spec.partition("=")
         if not sep or not label or not run_dir:
             parser.error(f"{spec!r}: expected LABEL=RUN_DIR")
-        runs[label] = measure(run_dir, args.speeds, args.episodes, args.seed)
-        for speed, stats in runs[label]["speeds"].items():
-            print(f"{label} at {speed} m/s: " + ", ".join(
-                f"{k} {v:.2f}" for k, v in stats.items() if v is not None))  # fmt: skip
+        runs[label] = measure(run_dir, args.speeds, args.episodes, args.seed, args.lead)
+        rows = {label: runs[label]["speeds"]} | {
+            f"{label}, {lead}": by_speed
+            for lead, by_speed in runs[label].get("led", {}).items()
+        }
+        for name, by_speed in rows.items():
+            for speed, stats in by_speed.items():
+                print(f"{name} at {speed} m/s: " + ", ".join(
+                    f"{k} {v:.2f}" for k, v in stats.items() if v is not None))  # fmt: skip
     record = machine.provenance("benchmarks.contact_hold", argv) | {
         "episodes": args.episodes, "seed": args.seed, "runs": runs,
     }  # fmt: skip

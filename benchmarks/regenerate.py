@@ -95,13 +95,20 @@ REPORTS: dict[str, list[str]] = {
         "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
         "static-then-robust=benchmarks/partners/et/seed*/static_then_robust",
     ],
-    "benchmarks/partners/et_delay": [
+    "benchmarks/partners/et_velocity": [
         "partner_report",
         "static=benchmarks/partners/et_mixed/seed*/static",
         "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
-        "actions-static=benchmarks/partners/et_delay/seed*/static",
-        "actions-static-then-mixed=benchmarks/partners/et_delay/seed*/static_then_mixed",
-        "actions-static-then-mixed-delay=benchmarks/partners/et_delay/seed*/static_then_mixed_delay",
+        "velocity-static=benchmarks/partners/et_velocity/seed*/static",
+        "velocity-static-then-mixed=benchmarks/partners/et_velocity/seed*/static_then_mixed",
+    ],
+    "benchmarks/partners/et_actions": [
+        "partner_report",
+        "static=benchmarks/partners/et_mixed/seed*/static",
+        "static-then-mixed=benchmarks/partners/et_mixed/seed*/static_then_mixed",
+        "actions-static=benchmarks/partners/et_actions/seed*/static",
+        "actions-static-then-mixed=benchmarks/partners/et_actions/seed*/static_then_mixed",
+        "actions-static-then-mixed-delay=benchmarks/partners/et_actions/seed*/static_then_mixed_delay",
     ],
     **{
         f"benchmarks/partners/{task}": [

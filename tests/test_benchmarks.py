@@ -207,3 +207,37 @@ def test_contact_hold_counts_the_steps_in_contact_after_the_first_and_the_change
     assert stats["share_in_contact_after_first"] == pytest.approx((6 / 6 + 4 / 7) / 2)
     assert stats["contact_changes_median"] == 1.0  # 1, 7 and 0 changes
     assert stats["share_in_contact_last_10_steps"] == pytest.approx((6 + 4) / 24)
+
+
+def test_the_privileged_lead_moves_the_palm_as_far_as_the_partner_goes_in_its_steps():
+    """contact_hold's lead: the arm and wrist set-points sent move by a displacement whose
+    forward kinematics carries the palm lead x period x the partner's true velocity (the
+    chain's FK, independent of the IK that found it); the fingers' are the policy's, and
+    lead 0 sends the policy's action unchanged."""
+    import jax.numpy as jnp
+
+    from benchmarks import contact_hold
+    from mjx_hands import env as env_lib
+    from mjx_hands import ik
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native", target_speed=0.2)
+    state = jax.jit(env.reset)(jax.random.PRNGKey(3))
+    policy_action = jnp.asarray(np.random.default_rng(0).uniform(-0.5, 0.5, 24), jnp.float32)
+    act = lambda obs: policy_action
+    chain = env.chain
+    arm = np.flatnonzero(np.isin(env.actuated_qadr, chain.qpos_adr))
+    assert len(arm) == len(chain.qpos_adr) == 6  # arm and wrist, each with its actuator
+    sent_plain = np.asarray(jax.jit(contact_hold.lead_step(env, act, 0))(state).pipeline_state.ctrl)
+    np.testing.assert_allclose(sent_plain, np.asarray(env.ctrl_for(policy_action)), atol=1e-6)
+    led = jax.jit(contact_hold.lead_step(env, act, 2))(state)
+    shift = np.asarray(led.pipeline_state.ctrl) - np.asarray(env.ctrl_for(policy_action))
+    fingers = np.setdiff1d(np.arange(24), arm)
+    np.testing.assert_allclose(shift[fingers], 0.0, atol=1e-6)
+    joints = np.asarray(state.pipeline_state.qpos)[chain.qpos_adr]
+    moved = joints.copy()
+    moved[[list(chain.qpos_adr).index(env.actuated_qadr[i]) for i in arm]] += shift[arm]
+    before = np.asarray(ik.forward(chain, jnp.asarray(joints))[0])
+    after = np.asarray(ik.forward(chain, jnp.asarray(moved))[0])
+    expected = 2 * env.config.control_dt * np.asarray(state.info["episode"].target_velocity)
+    assert np.linalg.norm(expected) == pytest.approx(0.016, rel=1e-4)  # 2 x 40 ms x 0.2 m/s
+    np.testing.assert_allclose(after - before, expected, atol=1e-3)
