@@ -634,7 +634,11 @@ class HandInteractionEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         """Advance one control period. action: (24,) in [-1, 1]."""
         action = jnp.clip(action, -1.0, 1.0)
-        data, episode = self._advance_partner(state.pipeline_state, state.info["episode"])
+        before = state.pipeline_state
+        data, episode = self._advance_partner(before, state.info["episode"])
+        # A moving partner glides from the last period's pose (``partner_motion``).
+        glide = self.config.partner_motion == "continuous" and self._partner_moves(episode)
+        mocap_from = (before.mocap_pos, before.mocap_quat) if glide else None
         applied = action
         if episode.action_queue is not None:  # the action of `delay` steps ago; queue this one
             queue = episode.action_queue
@@ -646,7 +650,7 @@ class HandInteractionEnv(Env):
         if episode.recent_actions is not None:
             recent = jnp.concatenate([action[None], episode.recent_actions[:-1]])
             episode = episode.replace(recent_actions=recent)
-        data = self.physics.step(data, self.ctrl_for(applied))
+        data = self.physics.step(data, self.ctrl_for(applied), mocap_from=mocap_from)
         readings = self.physics.readings(data)
         episode = episode.replace(step=episode.step + 1)
         features = self._features(readings, episode, data)
@@ -745,6 +749,12 @@ class HandInteractionEnv(Env):
         if episode.partner_base_pos is not None:
             episode = episode.replace(partner_base_pos=position)
         return data.replace(mocap_pos=mocap_pos), episode
+
+    @staticmethod
+    def _partner_moves(episode: EpisodeInfo) -> bool:
+        """Whether this configuration's partner can move within an episode (known when
+        tracing: the moving target's velocity or the recorded partner's row exist)."""
+        return episode.target_velocity is not None or episode.partner_row is not None
 
     def _advance_partner(self, data, episode: EpisodeInfo) -> tuple[Any, EpisodeInfo]:
         """The target hand one control period on, before the physics step of the period:

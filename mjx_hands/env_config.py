@@ -26,6 +26,9 @@ PHYSICS = ("auto", "mjx", "native", "warp")
 """``EnvConfig.physics``: MJX, native C MuJoCo, MuJoCo Warp, or auto (native on CPUs, MJX
 elsewhere); ``mjx_hands.physics``."""
 PARTNERS = ("static", "recorded")
+PARTNER_MOTIONS = ("per_step", "continuous")
+"""``EnvConfig.partner_motion``: how a moving partner's kinematic hand travels within a
+control period."""
 """``EnvConfig.partner``: a target hand that holds one pose, or one that replays its
 demonstration (``mjx_hands.partner``)."""
 
@@ -170,6 +173,14 @@ class EnvConfig:
     """[low, high] control steps, drawn uniformly per episode: how far the recorded
     partner runs ahead of (> 0) or behind (< 0) the demonstration's time at the agent's
     start, so that its arrival is not tied to the agent's start."""
+    partner_motion: Literal[PARTNER_MOTIONS] = "per_step"
+    """How the partner hand (kinematic: mocap bodies) travels within a control period,
+    wherever it moves (``target_speed``, the recorded partner): 'per_step' places it at
+    the period's pose before the period's physics substeps, a jump of speed x
+    ``control_dt`` (8 mm at 0.2 m/s) into or away from the agent's fingers; 'continuous'
+    carries it from the last period's pose to this one's in equal parts over the
+    substeps (positions linearly, orientations by normalised linear interpolation), as a
+    human hand moves. Both reach the same poses at the ends of the periods."""
     target_turn_period: float = 0.5
     """Seconds between the moving target's changes of direction."""
     target_motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
@@ -293,6 +304,7 @@ def config_problems(config: EnvConfig) -> list[str]:
             ("demos", DEMO_SETS),
             ("physics", PHYSICS),
             ("partner", PARTNERS),
+            ("partner_motion", PARTNER_MOTIONS),
         )
         if getattr(config, name) not in choices
     ]
@@ -310,7 +322,10 @@ def config_problems(config: EnvConfig) -> list[str]:
                 "target_orientation_range and target_rotation_noise/target_rotation_angle "
                 "both turn the target: give one"
             )
-    if config.observe_target_velocity and profiles.env_profile(config.profile).observation == "paper":
+    if (
+        config.observe_target_velocity
+        and profiles.env_profile(config.profile).observation == "paper"
+    ):
         problems.append(
             "observe_target_velocity needs the project observation; the paper profile's is "
             "the authors' (no velocity of the partner)"

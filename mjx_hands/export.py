@@ -211,6 +211,7 @@ def export(args: ExportArgs, out=sys.stdout) -> dict[str, Any]:
             "action_delay": single.config.action_delay,
             "action_delay_range": single.config.action_delay_range,
             "observe_recent_actions": single.config.observe_recent_actions,
+            "partner_motion": single.config.partner_motion,
             "sensordata": {
                 name: [getattr(layout, name).start, getattr(layout, name).stop]
                 for name in ("points", "contacts", "touch")

@@ -63,11 +63,13 @@ class Player:
         return len(self.episodes["qpos"])
 
     # ------------------------------------------------------------------ physics
-    def _run(self, state: dict, ctrl: np.ndarray, mocap: tuple, nstep: int):
+    def _run(self, state: dict, ctrl: np.ndarray, mocap: tuple, nstep: int, mocap_from=None):
         """``nstep`` physics steps from ``state`` (float32 time, qpos, qvel, as the
         training program keeps it between control periods) with the partner's mocap
-        bodies at ``mocap`` (positions (nmocap, 3), quaternions (nmocap, 4)), the solver
-        started cold; returns (time, qpos, qvel, sensordata) in float32."""
+        bodies at ``mocap`` (positions (nmocap, 3), quaternions (nmocap, 4)) or, given
+        ``mocap_from``, carried there from it over the steps (``partner_motion``
+        continuous), the solver started cold; returns (time, qpos, qvel, sensordata) in
+        float32."""
         m, d = self.model, self.data
         d.time = float(state["time"])
         d.qpos[:] = state["qpos"]
@@ -75,9 +77,17 @@ class Player:
         d.ctrl[:] = ctrl
         d.mocap_pos[:], d.mocap_quat[:] = mocap
         d.qacc_warmstart[:] = 0.0
-        for _ in range(nstep):
+        for i in range(nstep):
+            if mocap_from is not None:
+                d.mocap_pos[:], d.mocap_quat[:] = glide(mocap_from, mocap, (i + 1) / nstep)
             mujoco.mj_step(m, d)
         return F32(d.time), d.qpos.astype(F32), d.qvel.astype(F32), d.sensordata.astype(F32)
+
+    def _glides(self, start: tuple, end: tuple) -> bool:
+        """Whether the partner travels from ``start`` to ``end`` over a period's substeps
+        (``partner_motion`` continuous, and it moved) rather than being placed."""
+        moved = not (np.array_equal(start[0], end[0]) and np.array_equal(start[1], end[1]))
+        return self.env.get("partner_motion", "per_step") == "continuous" and moved
 
     def _readings(self, sensordata: np.ndarray) -> dict[str, np.ndarray]:
         s = self.sensors
@@ -151,7 +161,8 @@ class Player:
                 queue = queue[1:] + [action]
             recent = ([action] + recent)[: len(recent)]
             ctrl = self.ctrl_lo + F32(0.5) * (applied + F32(1.0)) * (self.ctrl_hi - self.ctrl_lo)
-            time, qpos, qvel, sensordata = self._run(state, ctrl, mocap(k), substeps)
+            origin = mocap(k - 1) if self._glides(mocap(k - 1), mocap(k)) else None
+            time, qpos, qvel, sensordata = self._run(state, ctrl, mocap(k), substeps, origin)
             if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
                 return {"success": False, "diverged": True, "steps": k}
             state = state | {"time": time, "qpos": qpos, "qvel": qvel}
@@ -171,6 +182,20 @@ class Player:
             "observations": np.stack(observations),
             "actions": np.stack(actions),
         }
+
+
+def glide(start: tuple, end: tuple, share: float) -> tuple[np.ndarray, np.ndarray]:
+    """The mocap poses ``share`` of the way from ``start`` to ``end`` (each (positions
+    (nmocap, 3), quaternions (nmocap, 4))): positions linearly, quaternions by normalised
+    linear interpolation on the shorter arc; ``end``'s at 1 (``mjx_hands.physics.mocap_path``)."""
+    (pos0, quat0), (pos1, quat1) = start, end
+    if share >= 1.0:
+        return pos1, quat1
+    pos0, pos1 = np.asarray(pos0, F32), np.asarray(pos1, F32)
+    quat0, quat1 = np.asarray(quat0, F32), np.asarray(quat1, F32)
+    quat0 = quat0 * np.where(np.sum(quat0 * quat1, -1, keepdims=True) < 0, F32(-1), F32(1))
+    quat = quat0 + F32(share) * (quat1 - quat0)
+    return pos0 + F32(share) * (pos1 - pos0), quat / np.linalg.norm(quat, axis=-1, keepdims=True)
 
 
 def render_video(player: Player, index: int, path: Path, camera: str, size=(480, 640)) -> None:

@@ -94,8 +94,11 @@ class Physics(Protocol):
         target's mocap bodies at ``mocap_pos`` (nmocap, 3) / ``mocap_quat`` (nmocap, 4);
         its readings are those of that pose."""
 
-    def step(self, state, ctrl: jax.Array):
-        """Advance one control period with set-points ``ctrl`` (nu,)."""
+    def step(self, state, ctrl: jax.Array, *, mocap_from: tuple | None = None):
+        """Advance one control period with set-points ``ctrl`` (nu,). ``mocap_from``: the
+        mocap poses (positions (nmocap, 3), quaternions (nmocap, 4)) the period starts
+        from, carried to ``state``'s over the substeps (:func:`mocap_path`); None: the
+        mocap bodies hold ``state``'s poses for the whole period."""
 
     def readings(self, state) -> Readings:
         """The readings of ``state`` (of the last substep's kinematics, as MuJoCo's
@@ -105,6 +108,34 @@ class Physics(Protocol):
         """Room for ``worlds`` simulations stepped in one call (a learner's members x
         environments), before the program that steps them is traced; a no-op where the
         engine sizes nothing ahead."""
+
+
+def mocap_path(start: tuple, end: tuple, n_substeps: int) -> tuple[jax.Array, jax.Array]:
+    """Mocap poses at the ends of ``n_substeps`` equal substeps from ``start`` to ``end``
+    (each ``(positions (nmocap, 3), quaternions (nmocap, 4))``): positions (n, nmocap, 3)
+    linearly, quaternions (n, nmocap, 4) by normalised linear interpolation on the
+    shorter arc; the last substep's are ``end``'s."""
+    (pos0, quat0), (pos1, quat1) = start, end
+    share = (jnp.arange(1, n_substeps + 1, dtype=jnp.float32) / n_substeps)[:, None, None]
+    positions = pos0 + share * (pos1 - pos0)
+    quat0 = quat0 * jnp.where(jnp.sum(quat0 * quat1, -1, keepdims=True) < 0, -1.0, 1.0)
+    quats = quat0 + share * (quat1 - quat0)
+    quats = quats / jnp.linalg.norm(quats, axis=-1, keepdims=True)
+    return positions, quats.at[-1].set(quat1)
+
+
+def substeps(model, data, n_substeps: int, mocap_from: tuple | None):
+    """``n_substeps`` ``mjx.step`` calls of ``model`` from ``data`` (MJX or MuJoCo Warp),
+    the mocap bodies carried from ``mocap_from`` to ``data``'s poses (``Physics.step``)."""
+    if mocap_from is None:
+        return jax.lax.fori_loop(0, n_substeps, lambda _, d: mjx.step(model, d), data)
+    positions, quats = mocap_path(mocap_from, (data.mocap_pos, data.mocap_quat), n_substeps)
+
+    def substep(d, pose):
+        d = d.replace(mocap_pos=pose[0], mocap_quat=pose[1])
+        return mjx.step(model, d), None
+
+    return jax.lax.scan(substep, data, (positions, quats))[0]
 
 
 def sensor_objects(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
@@ -149,12 +180,19 @@ def capsule_box_pairs(m: mujoco.MjModel, sensor_of_geom: np.ndarray) -> tuple[np
         for a, b in ((g1, g2), (g2, g1)):
             if m.geom_type[a] == capsule and m.geom_type[b] == box and sensor_of_geom[a] >= 0:
                 pairs.append((a, b, sensor_of_geom[a]))
-    return tuple(np.array(column, np.int32).reshape(-1) for column in zip(*pairs)) if pairs else (
-        np.zeros(0, np.int32),) * 3
+    return (
+        tuple(np.array(column, np.int32).reshape(-1) for column in zip(*pairs))
+        if pairs
+        else (np.zeros(0, np.int32),) * 3
+    )
 
 
 def segment_box_distance(
-    a: jax.Array, b: jax.Array, centre: jax.Array, rot: jax.Array, half: jax.Array,
+    a: jax.Array,
+    b: jax.Array,
+    centre: jax.Array,
+    rot: jax.Array,
+    half: jax.Array,
     iterations: int = 32,
 ) -> jax.Array:
     """Distance from segments ``a``-``b`` (..., 3) to boxes (centre (..., 3), rotation
@@ -221,15 +259,22 @@ class MjxPhysics:
         with jax.default_matmul_precision("highest"):
             return mjx.forward(self.mjx_model, data)
 
-    def step(self, data: mjx.Data, ctrl: jax.Array, model: mjx.Model | None = None) -> mjx.Data:
+    def step(
+        self,
+        data: mjx.Data,
+        ctrl: jax.Array,
+        model: mjx.Model | None = None,
+        *,
+        mocap_from: tuple | None = None,
+    ) -> mjx.Data:
         """``model``: another compiled model of the same scene (benchmarks vary solver
-        settings); default the physics' own."""
+        settings); default the physics' own. ``mocap_from``: see ``Physics.step``."""
         model = self.mjx_model if model is None else model
         data = data.replace(ctrl=ctrl)
         # GPUs default float32 matmuls to TF32 (10-bit mantissa), too coarse for the
         # constraint solver; the physics keeps full float32 (a no-op on CPU).
         with jax.default_matmul_precision("highest"):
-            return jax.lax.fori_loop(0, self.n_substeps, lambda _, d: mjx.step(model, d), data)
+            return substeps(model, data, self.n_substeps, mocap_from)
 
     def readings(self, data: mjx.Data) -> Readings:
         contact = data._impl.contact
@@ -402,9 +447,14 @@ class NativePhysics:
         _, _, _, sensordata = self._rollout(state, 1)
         return state.replace(sensordata=sensordata)
 
-    def step(self, state: NativeState, ctrl: jax.Array) -> NativeState:
+    def step(
+        self, state: NativeState, ctrl: jax.Array, *, mocap_from: tuple | None = None
+    ) -> NativeState:
         state = state.replace(ctrl=ctrl)
-        qpos, qvel, time, sensordata = self._rollout(state, self.n_substeps)
+        path = None
+        if mocap_from is not None:
+            path = mocap_path(mocap_from, (state.mocap_pos, state.mocap_quat), self.n_substeps)
+        qpos, qvel, time, sensordata = self._rollout(state, self.n_substeps, path)
         return state.replace(qpos=qpos, qvel=qvel, time=time, sensordata=sensordata)
 
     def readings(self, state: NativeState) -> Readings:
@@ -414,9 +464,12 @@ class NativePhysics:
         """``mujoco.rollout`` takes any batch: nothing to reserve."""
 
     # ------------------------------------------------------------- the callback
-    def _rollout(self, state: NativeState, nstep: int):
-        """(qpos, qvel, time, sensordata) after ``nstep`` physics steps; under vmap one
-        host call receives the whole batch."""
+    def _rollout(self, state: NativeState, nstep: int, mocap: tuple | None = None):
+        """(qpos, qvel, time, sensordata) after ``nstep`` physics steps, the mocap bodies
+        at ``mocap``'s poses per step ((nstep, nmocap, 3), (nstep, nmocap, 4)) or, None,
+        at ``state``'s throughout; under vmap one host call receives the whole batch."""
+        path = mocap is not None
+        mocap_pos, mocap_quat = mocap if path else (state.mocap_pos, state.mocap_quat)
         m = self.mj_model
         shapes = (
             jax.ShapeDtypeStruct((m.nq,), jnp.float32),
@@ -425,28 +478,35 @@ class NativePhysics:
             jax.ShapeDtypeStruct((m.nsensordata,), jnp.float32),
         )
         return jax.pure_callback(
-            lambda *a: self.run(*a, nstep=nstep),
+            lambda *a: self.run(*a, nstep=nstep, path=path),
             shapes,
             state.time,
             state.qpos,
             state.qvel,
             state.ctrl,
-            state.mocap_pos,
-            state.mocap_quat,
+            mocap_pos,
+            mocap_quat,
             vmap_method="broadcast_all",
         )
 
-    def run(self, time, qpos, qvel, ctrl, mocap_pos, mocap_quat, *, nstep: int):
-        """Host side: any leading batch shape; float32 in and out, float64 inside."""
+    def run(self, time, qpos, qvel, ctrl, mocap_pos, mocap_quat, *, nstep: int, path: bool = False):
+        """Host side: any leading batch shape; float32 in and out, float64 inside. With
+        ``path`` the mocap poses hold one per step ((..., nstep, nmocap, 3 / 4))."""
         m = self.native_model
         lead = np.shape(qpos)[:-1]
         batch = int(np.prod(lead, dtype=np.int64))
         flat = lambda x, n: np.asarray(x, np.float64).reshape(batch, n)
         initial = np.concatenate([flat(time, 1), flat(qpos, m.nq), flat(qvel, m.nv)], axis=1)
+        steps = nstep if path else 1  # one control row holds for every step
+        per_step = lambda x, n: np.asarray(x, np.float64).reshape(batch, steps, n)
         control = np.concatenate(
-            [flat(ctrl, m.nu), flat(mocap_pos, 3 * m.nmocap), flat(mocap_quat, 4 * m.nmocap)],
-            axis=1,
-        )[:, None, :]
+            [
+                np.broadcast_to(flat(ctrl, m.nu)[:, None, :], (batch, steps, m.nu)),
+                per_step(mocap_pos, 3 * m.nmocap),
+                per_step(mocap_quat, 4 * m.nmocap),
+            ],
+            axis=2,
+        )
         with self._lock:
             states, sensordata = self._pool.rollout(
                 m,
@@ -550,11 +610,11 @@ class WarpPhysics:
         data = mjx.forward(self.warp_model, self._data(state))
         return state.replace(sensordata=data.sensordata)
 
-    def step(self, state: NativeState, ctrl: jax.Array) -> NativeState:
+    def step(
+        self, state: NativeState, ctrl: jax.Array, *, mocap_from: tuple | None = None
+    ) -> NativeState:
         state = state.replace(ctrl=ctrl)
-        data = jax.lax.fori_loop(
-            0, self.n_substeps, lambda _, d: mjx.step(self.warp_model, d), self._data(state)
-        )
+        data = substeps(self.warp_model, self._data(state), self.n_substeps, mocap_from)
         return state.replace(
             qpos=data.qpos, qvel=data.qvel, time=data.time, sensordata=data.sensordata
         )

@@ -45,7 +45,7 @@ import jax
 import numpy as np
 import tyro
 
-from mjx_hands import checkpoint, compile_cache, policies, rollouts
+from mjx_hands import checkpoint, compile_cache, env_config, policies, rollouts
 from mjx_hands import env as env_lib
 
 ORIENTATION_FILE = "robustness_orientation"
@@ -90,6 +90,9 @@ class RobustnessArgs:
     """Seconds between the moving target's changes of direction."""
     motion_box: tuple[float, float, float] = (0.1, 0.1, 0.1)
     """Half-extent of the box (metres) around the nominal target position it moves in."""
+    partner_motion: Literal[env_config.PARTNER_MOTIONS] | None = None
+    """How the moving or recorded partner travels within a control period
+    (``EnvConfig.partner_motion``: per_step or continuous); default each policy's own."""
     episodes: int = 32
     """Episodes per grid cell and per speed, per run."""
     best: bool = False
@@ -441,10 +444,18 @@ def load_runs(args: RobustnessArgs) -> list[tuple]:
         policy = policies.load_policy(Path(run_dir), eval_envs=args.chunk, best=args.best)
         # Every policy meets the same partner, whatever it trained against.
         scoring = env_lib.scoring_env(policy.single.config)
+        if args.partner_motion not in (None, scoring.config.partner_motion):
+            motion = dataclasses.replace(scoring.config, partner_motion=args.partner_motion)
+            scoring = env_lib.env_for(motion)
         loaded.append((run_dir, policy.act, scoring, policy.epoch))
     tasks = {single.config.task for _, _, single, _ in loaded}
     if len(tasks) > 1:
         raise ValueError(f"the runs are of different tasks {sorted(tasks)}; give runs of one task")
+    motions = {single.config.partner_motion for _, _, single, _ in loaded}
+    if len(motions) > 1:
+        raise ValueError(
+            f"the runs' partners travel differently {sorted(motions)}; give --partner-motion"
+        )
     return loaded
 
 
@@ -469,6 +480,7 @@ def main(argv: list[str] | None = None) -> int:
         "checkpoint": {"kind": "best" if args.best else "latest", "epochs": [r[3] for r in runs]},
         "episodes": args.episodes,
         "seed": args.seed,
+        "partner_motion": runs[0][2].config.partner_motion,
     }
     sweeps = SWEEPS[args.sweep]
     if "orientation" in sweeps:

@@ -172,8 +172,11 @@ def test_a_drawn_action_delay_applies_each_episode_its_own_and_the_recent_action
     action reaches the actuators exactly its episode's steps later (the start pose held
     before); the observation's last 48 entries are the policy's last 2 actions."""
     env = env_lib.make_env(
-        "et", mocap_source="synthetic", physics="native",
-        action_delay_range=(0, 2), observe_recent_actions=2,
+        "et",
+        mocap_source="synthetic",
+        physics="native",
+        action_delay_range=(0, 2),
+        observe_recent_actions=2,
     )
     plain = env_lib.make_env("et", mocap_source="synthetic", physics="native")
     assert env.observation_size == plain.observation_size + 2 * 24
@@ -227,7 +230,9 @@ def test_the_action_rate_term_charges_each_change_of_action_and_nothing_else():
     previous = np.concatenate([np.asarray(hold)[None], actions[:-1]])
     expected = -0.05 * np.sum((actions - previous) ** 2, axis=-1)
     np.testing.assert_allclose(np.asarray(metrics["reward/action_rate"]), expected, rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(reward) - np.asarray(base), expected, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(
+        np.asarray(reward) - np.asarray(base), expected, rtol=1e-4, atol=1e-5
+    )
     assert "reward/action_rate" not in plain.reset(key).metrics
     with pytest.raises(ValueError, match="action_rate_weight -1.0 must be >= 0"):
         env_lib.HandInteractionEnv(env_lib.EnvConfig(action_rate_weight=-1.0))
@@ -658,3 +663,205 @@ def test_the_exported_player_delays_and_observes_actions_as_the_environment_does
         np.testing.assert_allclose(
             player.play(i)["observations"], trajectory["obs"][:, i], atol=1e-4
         )
+
+
+# ------------------------------------------------------- how the partner travels
+def _nlerp_reference(q0, q1, share):
+    """NumPy: normalised linear interpolation of unit quaternions on the shorter arc."""
+    q0 = q0 if np.dot(q0, q1) >= 0 else -q0
+    q = (1 - share) * q0 + share * q1
+    return q / np.linalg.norm(q)
+
+
+def test_the_mocap_path_interpolates_positions_and_turns_to_the_periods_end():
+    from mjx_hands import physics
+
+    rng = np.random.default_rng(3)
+    pos0, pos1 = rng.normal(size=(2, 5, 3)).astype(np.float32)
+    quat0 = rng.normal(size=(5, 4)).astype(np.float32)
+    quat0 /= np.linalg.norm(quat0, axis=-1, keepdims=True)
+    quat1 = -quat0 + 0.3 * rng.normal(size=(5, 4)).astype(np.float32)  # the far hemisphere
+    quat1 /= np.linalg.norm(quat1, axis=-1, keepdims=True)
+    positions, quats = physics.mocap_path((pos0, quat0), (pos1, quat1), 10)
+    assert positions.shape == (10, 5, 3) and quats.shape == (10, 5, 4)
+    for k in range(10):
+        share = (k + 1) / 10
+        np.testing.assert_allclose(positions[k], pos0 + share * (pos1 - pos0), atol=1e-6)
+        for b in range(5):
+            expected = _nlerp_reference(quat0[b], quat1[b], share)
+            np.testing.assert_allclose(quats[k, b], expected, atol=1e-5)
+    np.testing.assert_array_equal(quats[-1], quat1)  # the period ends where it was placed
+
+
+TETHERED = """
+<mujoco>
+  <option timestep="0.004"/>
+  <worldbody>
+    <body name="plate" mocap="true" pos="0 0 0"><geom type="box" size=".05 .05 .01" contype="0" conaffinity="0"/></body>
+    <body name="ball" pos="0 0 0">
+      <joint name="x" type="slide" axis="1 0 0" damping="0.5"/>
+      <joint name="y" type="slide" axis="0 1 0" damping="0.5"/>
+      <joint name="z" type="slide" axis="0 0 1" damping="0.5"/>
+      <joint name="turn" type="ball" damping="0.01"/>
+      <geom type="sphere" size=".02" mass="0.1" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+  <equality><weld body1="ball" body2="plate" solref="0.02 1"/></equality>
+  <actuator><position joint="x" kp="1"/></actuator>
+</mujoco>
+"""
+"""A ball tethered to a mocap plate by a soft weld: where it ends after a period depends
+on the path the plate took within it, not only on where the plate ends."""
+
+
+def _mj_step_reference(m, qpos, qvel, ctrl, poses):
+    """C reference of one control period: ``mujoco.mj_step`` per pose in ``poses``
+    [(positions, quats)], the mocap bodies set to it before that substep."""
+    import mujoco
+
+    d = mujoco.MjData(m)
+    d.qpos[:], d.qvel[:], d.ctrl[:] = qpos, qvel, ctrl
+    for pos, quat in poses:
+        d.mocap_pos[:], d.mocap_quat[:] = pos, quat
+        mujoco.mj_step(m, d)
+    return d.qpos.copy(), d.qvel.copy()
+
+
+@pytest.fixture(scope="module")
+def tethered():
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_string(TETHERED)
+    start = (np.zeros((1, 3), np.float32), np.array([[1.0, 0, 0, 0]], np.float32))
+    turn = np.array([[np.cos(0.2), 0, 0, np.sin(0.2)]], np.float32)  # 0.4 rad about z
+    end = (np.array([[0.012, -0.004, 0.006]], np.float32), turn)
+    n = 10
+    share = lambda k: (k + 1) / n
+    glide = [
+        (start[0] + share(k) * (end[0] - start[0]), _nlerp_reference(start[1][0], end[1][0], share(k))[None])
+        for k in range(n)
+    ]  # fmt: skip
+    qvel = np.array([0.05, 0.0, -0.02, 0.0, 0.1, 0.0], np.float32)
+    return m, start, end, n, {"per_step": [end] * n, "continuous": glide}, qvel
+
+
+def test_native_physics_carries_the_mocap_bodies_along_their_path_as_mj_step_does(tethered):
+    from mjx_hands import physics
+
+    m, start, end, n, paths, qvel = tethered
+    native = physics.NativePhysics(m, n, 0.002, threads=1)
+    state = physics.NativeState(
+        qpos=jnp.asarray(m.qpos0, jnp.float32), qvel=jnp.asarray(qvel), ctrl=jnp.zeros(1),
+        mocap_pos=jnp.asarray(end[0]), mocap_quat=jnp.asarray(end[1]),
+        time=jnp.zeros(()), sensordata=jnp.zeros(m.nsensordata),
+    )  # fmt: skip
+    ended = {
+        "per_step": native.step(state, jnp.zeros(1)),
+        "continuous": native.step(state, jnp.zeros(1), mocap_from=start),
+    }
+    for motion, after in ended.items():
+        expected, _ = _mj_step_reference(m, m.qpos0, qvel, np.zeros(1), paths[motion])
+        np.testing.assert_allclose(np.asarray(after.qpos), expected, atol=1e-6)
+    # The premise: the two paths leave the ball in different places.
+    gap = np.abs(np.asarray(ended["per_step"].qpos) - np.asarray(ended["continuous"].qpos))
+    assert gap.max() > 1e-3, gap
+
+
+def test_mjx_substeps_carry_the_mocap_bodies_along_their_path_as_mj_step_does(tethered):
+    from mujoco import mjx
+
+    from mjx_hands import physics
+
+    m, start, end, n, paths, qvel = tethered
+    model = mjx.put_model(m)
+    data = mjx.make_data(m).replace(
+        qpos=jnp.asarray(m.qpos0, jnp.float32),
+        qvel=jnp.asarray(qvel),
+        mocap_pos=jnp.asarray(end[0]),
+        mocap_quat=jnp.asarray(end[1]),
+    )
+    run = jax.jit(lambda d, origin: physics.substeps(model, d, n, origin))
+    ended = {"per_step": physics.substeps(model, data, n, None), "continuous": run(data, start)}
+    for motion, after in ended.items():
+        expected, _ = _mj_step_reference(m, m.qpos0, qvel, np.zeros(1), paths[motion])
+        # MJX steps in float32 (3e-5 measured on the ball's turn), ten times below the gap.
+        np.testing.assert_allclose(np.asarray(after.qpos), expected, atol=1e-4)
+    gap = np.abs(np.asarray(ended["per_step"].qpos) - np.asarray(ended["continuous"].qpos))
+    assert gap.max() > 1e-3, gap
+
+
+class _Handed:
+    """Wraps a physics' step, keeping each call's ``mocap_from`` (None or positions)."""
+
+    def __init__(self, step):
+        self.step, self.origins = step, []
+
+    def __call__(self, state, ctrl, *, mocap_from=None):
+        self.origins.append(None if mocap_from is None else np.asarray(mocap_from[0]))
+        return self.step(state, ctrl, mocap_from=mocap_from)
+
+
+@pytest.mark.parametrize("partner", ["static", "recorded"])
+def test_the_environment_glides_a_moving_partner_from_the_last_periods_pose(partner, monkeypatch):
+    """``partner_motion='continuous'``: every step hands the physics the pose the period
+    starts from (the last step's, after reset the placed one) and ends at the same pose
+    as per step; a partner that cannot move is never glided."""
+    from mjx_hands import env_config
+
+    config = {"mocap_source": "synthetic", "physics": "native", "partner": partner,
+              "target_speed": 0.3}  # fmt: skip
+    action = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, 24), jnp.float32)
+    poses = {}
+    for motion in env_config.PARTNER_MOTIONS:
+        env = env_lib.make_env("et", partner_motion=motion, **config)
+        handed = _Handed(env.physics.step)
+        monkeypatch.setattr(env.physics, "step", handed)
+        state = env.reset(jax.random.PRNGKey(4))
+        trajectory = [np.asarray(state.pipeline_state.mocap_pos)]
+        for _ in range(3):
+            state = env.step(state, action)
+            trajectory.append(np.asarray(state.pipeline_state.mocap_pos))
+        poses[motion] = np.stack(trajectory)
+        if motion == "per_step":
+            assert handed.origins == [None] * 3
+        else:  # the origins handed over are the previous steps' poses
+            for origin, previous in zip(handed.origins, trajectory[:-1]):
+                np.testing.assert_allclose(origin, previous, atol=1e-7)
+    np.testing.assert_allclose(poses["per_step"], poses["continuous"], atol=1e-5)
+    assert np.abs(poses["continuous"][-1] - poses["continuous"][0]).max() > 0.02  # it moved
+    still = env_lib.make_env(
+        "et", mocap_source="synthetic", physics="native", partner_motion="continuous"
+    )
+    handed = _Handed(still.physics.step)
+    monkeypatch.setattr(still.physics, "step", handed)
+    still.step(still.reset(jax.random.PRNGKey(4)), action)
+    assert handed.origins == [None]
+    with pytest.raises(ValueError, match="unknown partner_motion 'smooth'"):
+        env_lib.HandInteractionEnv(env_lib.EnvConfig(partner_motion="smooth"))
+
+
+def test_the_player_glides_the_partner_as_the_training_physics_does():
+    """The exported player (NumPy, no JAX) carries the partner along the same substep
+    poses as ``physics.mocap_path``, and only for a continuous partner that moved."""
+    from types import SimpleNamespace
+
+    from mjx_hands import onnx_player, physics
+
+    rng = np.random.default_rng(5)
+    start = (rng.normal(size=(5, 3)).astype(np.float32), IDENTITY[None].repeat(5, 0))
+    turn = rng.normal(size=(5, 4)).astype(np.float32)
+    end = (
+        rng.normal(size=(5, 3)).astype(np.float32),
+        turn / np.linalg.norm(turn, axis=-1)[:, None],
+    )
+    positions, quats = physics.mocap_path(start, end, 10)
+    for k in range(10):
+        pos, quat = onnx_player.glide(start, end, (k + 1) / 10)
+        np.testing.assert_allclose(pos, positions[k], atol=1e-6)
+        np.testing.assert_allclose(quat, quats[k], atol=1e-6)
+    glides = lambda motion, a, b: onnx_player.Player._glides(
+        SimpleNamespace(env={"partner_motion": motion}), a, b
+    )
+    assert glides("continuous", start, end)
+    assert not glides("continuous", start, start) and not glides("per_step", start, end)
+    assert not onnx_player.Player._glides(SimpleNamespace(env={}), start, end)  # older exports
