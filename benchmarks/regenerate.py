@@ -109,7 +109,19 @@ REPORTS: dict[str, list[str]] = {
         "actions-static=benchmarks/partners/et_actions/seed*/static",
         "actions-static-then-mixed=benchmarks/partners/et_actions/seed*/static_then_mixed",
         "actions-static-then-mixed-delay=benchmarks/partners/et_actions/seed*/static_then_mixed_delay",
+        "actions-static-then-mixed-continuous="
+        "benchmarks/partners/et_actions/seed*/static_then_mixed_continuous",
     ],
+    **{
+        f"benchmarks/partners/{task}_actions": [
+            "partner_report",
+            f"static=benchmarks/partners/{task}/seed*/static",
+            f"static-then-mixed=benchmarks/partners/{task}/seed*/static_then_mixed",
+            f"actions-static=benchmarks/partners/{task}_actions/seed*/static",
+            f"actions-static-then-mixed=benchmarks/partners/{task}_actions/seed*/static_then_mixed",
+        ]
+        for task in ("handclap", "handshake")
+    },
     **{
         f"benchmarks/partners/{task}": [
             "partner_report",
