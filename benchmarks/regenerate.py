@@ -109,8 +109,10 @@ REPORTS: dict[str, list[str]] = {
         "actions-static=benchmarks/partners/et_actions/seed*/static",
         "actions-static-then-mixed=benchmarks/partners/et_actions/seed*/static_then_mixed",
         "actions-static-then-mixed-delay=benchmarks/partners/et_actions/seed*/static_then_mixed_delay",
-        "actions-static-then-mixed-continuous="
-        "benchmarks/partners/et_actions/seed*/static_then_mixed_continuous",
+        (
+            "actions-static-then-mixed-continuous="
+            "benchmarks/partners/et_actions/seed*/static_then_mixed_continuous"
+        ),
     ],
     **{
         f"benchmarks/partners/{task}_actions": [
