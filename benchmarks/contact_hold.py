@@ -19,6 +19,12 @@ carries the palm as far as the partner will move in N control steps at its true
 velocity, which nothing learned observes (a turn of the partner stays unforeseen; 0:
 the policy alone, through the same code). Where even that does not hold contact,
 prediction is not what the policies lack.
+
+``--gaps`` also says how near the misses are: after every step, each of the task's
+success groups' nearest sensed phalanx's distance to the partner (negative: pressed into
+it), recomputed by native MuJoCo from the recorded poses with the pairs listed from
+``GAP_LISTING`` apart, and the largest over the groups (the one that decides success):
+quantiles at the last step and the share of the steps from the 10th within 2, 5 and 10 mm.
 """
 
 from __future__ import annotations
@@ -27,11 +33,19 @@ import argparse
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 
 from benchmarks import machine
 from mjx_hands import env as env_lib
-from mjx_hands import ik, policies, robustness, rollouts
+from mjx_hands import ik, physics, policies, robustness, rollouts, scene
+from mjx_hands import shadow_hand as sh
+
+GAP_LISTING = 0.03
+"""Metres apart from which ``--gaps`` lists a phalanx's pairs (beyond: no distance)."""
+
+GAP_WITHIN = (0.002, 0.005, 0.01)
+"""Distances (m) whose share of steps ``--gaps`` reports."""
 
 
 def hold_statistics(success: np.ndarray) -> dict[str, float]:
@@ -48,6 +62,41 @@ def hold_statistics(success: np.ndarray) -> dict[str, float]:
         "contact_changes_median": float(np.median(changes)),
         "share_in_contact_last_10_steps": float(success[-10:].mean()),
     }
+
+
+def group_gaps(mj_model, qpos, mocap_pos, mocap_quat, groups: np.ndarray) -> np.ndarray:
+    """(...,) the largest over the success ``groups`` ((G, 15) bool; empty rows skipped) of
+    the group's nearest sensed phalanx's distance (m) to the partner, per recorded pose
+    (qpos (..., nq), mocap_pos (..., nmocap, 3), mocap_quat (..., nmocap, 4)); inf where a
+    group has no pair within ``GAP_LISTING``."""
+    model = physics.native_model(mj_model, GAP_LISTING)
+    data = mujoco.MjData(model)
+    groups = groups[groups.any(axis=1)].astype(bool)
+    lead = qpos.shape[:-1]
+    flat = (qpos.reshape(-1, qpos.shape[-1]), mocap_pos.reshape(-1, *mocap_pos.shape[-2:]),
+            mocap_quat.reshape(-1, *mocap_quat.shape[-2:]))  # fmt: skip
+    out = np.empty(flat[0].shape[0])
+    for i, (q, pos, quat) in enumerate(zip(*flat)):
+        data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = q, pos, quat
+        mujoco.mj_forward(model, data)
+        found, dist = (
+            data.sensordata[scene.SENSOR_LAYOUT.contacts].reshape(len(sh.CONTACT_SENSORS), 2).T
+        )
+        nearest = np.where(found > 0, dist, np.inf)
+        out[i] = max(nearest[g].min() for g in groups)
+    return out.reshape(lead)
+
+
+def gap_statistics(gaps: np.ndarray) -> dict[str, float]:
+    """Statistics of (T, n) :func:`group_gaps` after each step (metres)."""
+    last = gaps[-1]
+    quantiles = np.quantile(
+        np.where(np.isfinite(last), last, GAP_LISTING), [0.1, 0.25, 0.5, 0.75, 0.9]
+    )
+    return {f"last_step_gap_q{int(100 * q)}_m": float(v) for q, v in
+            zip((0.1, 0.25, 0.5, 0.75, 0.9), quantiles)} | {
+        f"share_of_steps_within_{1000 * d:g}_mm": float((gaps[10:] < d).mean()) for d in GAP_WITHIN
+    }  # fmt: skip
 
 
 def lead_step(env, act, lead_steps: int, ik_iterations: int = 10):
@@ -89,10 +138,16 @@ def led_success(env, act, reset, keys, reset_args, lead_steps: int) -> np.ndarra
 
 
 def measure(
-    run_dir: str, speeds: list[float], episodes: int, seed: int, leads: list[int] = ()
+    run_dir: str,
+    speeds: list[float],
+    episodes: int,
+    seed: int,
+    leads: list[int] = (),
+    gaps: bool = False,
 ) -> dict:
-    """{speed: hold statistics} of one run's policy, and {"lead N": {speed: ...}} of it
-    with its arm led N steps ahead of the partner (``leads``)."""
+    """{speed: hold statistics} of one run's policy (with ``gaps`` its
+    :func:`gap_statistics` too), and {"lead N": {speed: ...}} of it with its arm led N
+    steps ahead of the partner (``leads``)."""
     loaded = policies.load_policy(run_dir, eval_envs=episodes)
     scoring = env_lib.scoring_env(loaded.single.config)
     sweep = robustness.RobustnessArgs  # the motion sweep's own turns and box
@@ -105,6 +160,11 @@ def measure(
         reset_args = (tilts, np.full(episodes, speed, np.float32))
         trajectory = rollouts.rollout(moving, loaded.act, keys, reset=reset, reset_args=reset_args)
         out[f"{speed:g}"] = hold_statistics(trajectory["success"] > 0.5)
+        if gaps:
+            groups = np.asarray(moving.params.success_groups[0])
+            after = group_gaps(moving.mj_model, *(trajectory[k][1:] for k in
+                               ("qpos", "mocap_pos", "mocap_quat")), groups)  # fmt: skip
+            out[f"{speed:g}"] |= gap_statistics(after)
         for n in leads:
             success = led_success(moving, loaded.act, reset, keys, reset_args, n)
             tracked[f"lead {n}"][f"{speed:g}"] = hold_statistics(success)
@@ -125,6 +185,11 @@ def main(argv: list[str] | None = None) -> dict:
         help="also score each policy with its arm led this many control steps ahead of "
         "the partner's true motion (several: one each; 0: the policy alone)",
     )  # fmt: skip
+    parser.add_argument(
+        "--gaps",
+        action="store_true",
+        help="also report how near the task's contacts are (see above)",
+    )
     parser.add_argument("--out")
     args = parser.parse_args(argv)
     if any(n < 0 for n in args.lead):
@@ -134,15 +199,14 @@ def main(argv: list[str] | None = None) -> dict:
         label, sep, run_dir = spec.partition("=")
         if not sep or not label or not run_dir:
             parser.error(f"{spec!r}: expected LABEL=RUN_DIR")
-        runs[label] = measure(run_dir, args.speeds, args.episodes, args.seed, args.lead)
+        runs[label] = measure(run_dir, args.speeds, args.episodes, args.seed, args.lead, args.gaps)
         rows = {label: runs[label]["speeds"]} | {
-            f"{label}, {lead}": by_speed
-            for lead, by_speed in runs[label].get("led", {}).items()
+            f"{label}, {lead}": by_speed for lead, by_speed in runs[label].get("led", {}).items()
         }
         for name, by_speed in rows.items():
             for speed, stats in by_speed.items():
                 print(f"{name} at {speed} m/s: " + ", ".join(
-                    f"{k} {v:.2f}" for k, v in stats.items() if v is not None))  # fmt: skip
+                    f"{k} {v:.3g}" for k, v in stats.items() if v is not None))  # fmt: skip
     record = machine.provenance("benchmarks.contact_hold", argv) | {
         "episodes": args.episodes, "seed": args.seed, "runs": runs,
     }  # fmt: skip

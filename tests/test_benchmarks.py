@@ -241,3 +241,47 @@ def test_the_privileged_lead_moves_the_palm_as_far_as_the_partner_goes_in_its_st
     expected = 2 * env.config.control_dt * np.asarray(state.info["episode"].target_velocity)
     assert np.linalg.norm(expected) == pytest.approx(0.016, rel=1e-4)  # 2 x 40 ms x 0.2 m/s
     np.testing.assert_allclose(after - before, expected, atol=1e-3)
+
+
+def test_contact_gaps_are_the_nearest_sensed_phalanx_distance_to_the_partner():
+    """contact_hold --gaps: E.T.'s one success group (the index distal phalanx) with the
+    partner carried to a few millimetres' distance and pressed in, against MuJoCo's
+    own geom-to-geom distance over that phalanx's pairs (mj_geomDistance)."""
+    import mujoco
+
+    from benchmarks import contact_hold
+    from mjx_hands import env as env_lib
+    from mjx_hands import physics, scene
+    from mjx_hands import shadow_hand as sh
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    qpos = np.asarray(state.pipeline_state.qpos)
+    groups = np.asarray(env.params.success_groups[0])
+    model = physics.native_model(env.mj_model, contact_hold.GAP_LISTING)
+    data = mujoco.MjData(model)
+    sensed = model.geom(scene.AGENT + sh.hand_name("C_" + sh.PHALANX_BODY[("ff", "distal")])).id
+    partners = model.pair_geom2[model.pair_geom1 == sensed]
+    assert partners.size > 0
+    tip = np.asarray(state.info["episode"].target_points)[sh.HAND_POINTS.index("fftip")]
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    agent_tip = data.site(scene.AGENT + sh.hand_name("S_fftip")).xpos.copy()
+    seen = []
+    for offset in (0.012, 0.006, 0.0, -0.004):  # partner's fingertip carried onto the agent's
+        mocap_pos = np.asarray(state.pipeline_state.mocap_pos).copy()
+        away = agent_tip - tip
+        mocap_pos[env.target_mocap] += away + offset * np.array([0.0, 0.0, 1.0])
+        mocap_quat = np.asarray(state.pipeline_state.mocap_quat)
+        gap = contact_hold.group_gaps(env.mj_model, qpos[None], mocap_pos[None],
+                                      mocap_quat[None], groups)[0]  # fmt: skip
+        data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+        mujoco.mj_forward(model, data)
+        expected = min(mujoco.mj_geomDistance(model, data, sensed, g, contact_hold.GAP_LISTING, None)
+                       for g in partners)  # fmt: skip
+        if expected < contact_hold.GAP_LISTING:
+            assert gap == pytest.approx(expected, abs=2e-4)
+            seen.append(gap)
+        else:
+            assert gap == np.inf
+    assert len(seen) >= 2 and min(seen) < 0.002  # near and touching cases were exercised
