@@ -285,3 +285,62 @@ def test_contact_gaps_are_the_nearest_sensed_phalanx_distance_to_the_partner():
         else:
             assert gap == np.inf
     assert len(seen) >= 2 and min(seen) < 0.002  # near and touching cases were exercised
+
+
+def test_carried_contacts_keep_the_palm_pose_relative_to_a_turned_target():
+    """reachability --carry: the palm's pose relative to the target palm (a NumPy
+    transcription of the frame change) is the same after the target turns 5 deg and the
+    arm is solved for it, as where it started (this start is clear of the joint limits); and the contact check's success is the
+    index distal phalanx's MuJoCo geom distance within the contact distance."""
+    import jax.numpy as jnp
+    import mujoco
+
+    from benchmarks import reachability
+    from mjx_hands import env as env_lib
+    from mjx_hands import ik, physics, scene
+    from mjx_hands import shadow_hand as sh
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    key = jax.random.PRNGKey(1)
+    start = env.reset_with(key, jnp.array([1.0, 0.0, 0.0, 0.0]))
+    q = start.pipeline_state.qpos[env.chain.qpos_adr]
+    pos, rot = ik.forward(env.chain, q)
+    episode = start.info["episode"]
+    rel_pos, rel_rot = reachability.relative_pose(pos, rot, episode.target_pos, episode.target_rot)
+    frame = np.asarray(episode.target_rot, np.float64)
+    np.testing.assert_allclose(rel_pos, frame.T @ np.asarray(pos - episode.target_pos), atol=1e-6)
+    np.testing.assert_allclose(rel_rot, frame.T @ np.asarray(rot), atol=1e-6)
+    turned = env.reset_with(key, env_lib.yaw_pitch_quat(np.radians(5.0), 0.0)).info["episode"]
+    arm = reachability.carried_arm(env.chain, rel_pos, rel_rot, turned.target_pos,
+                                   turned.target_rot, q, jax.random.PRNGKey(2), 2, 100, 1.0)  # fmt: skip
+    assert np.all((arm >= env.chain.lower - 1e-6) & (arm <= env.chain.upper + 1e-6))
+    new_pos, new_rot = ik.forward(env.chain, arm)
+    turned_frame = np.asarray(turned.target_rot, np.float64)
+    np.testing.assert_allclose(turned_frame.T @ np.asarray(new_pos - turned.target_pos),
+                               np.asarray(rel_pos), atol=1e-4)  # fmt: skip
+    np.testing.assert_allclose(turned_frame.T @ np.asarray(new_rot), np.asarray(rel_rot), atol=1e-3)
+
+    model = physics.native_model(env.mj_model, env.config.contact_distance)
+    data = mujoco.MjData(model)
+    sensed = model.geom(scene.AGENT + sh.hand_name("C_" + sh.PHALANX_BODY[("ff", "distal")])).id
+    partners = model.pair_geom2[model.pair_geom1 == sensed]
+    groups = np.asarray(env.params.success_groups[0])
+    qpos = np.asarray(start.pipeline_state.qpos)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    agent_tip = data.site(scene.AGENT + sh.hand_name("S_fftip")).xpos.copy()
+    tip = np.asarray(episode.target_points)[sh.HAND_POINTS.index("fftip")]
+    verdicts = set()
+    for offset in (0.2, 0.005, 0.0, -0.003):  # far away, near, touching, pressed
+        mocap_pos = np.asarray(start.pipeline_state.mocap_pos).copy()
+        mocap_pos[env.target_mocap] += agent_tip - tip + offset * np.array([0.0, 0.0, 1.0])
+        mocap_quat = np.asarray(start.pipeline_state.mocap_quat)
+        ok, depth = reachability.contact_check(model, data, qpos, mocap_pos, mocap_quat, groups,
+                                               env.config.contact_distance)  # fmt: skip
+        data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+        mujoco.mj_forward(model, data)
+        nearest = min(mujoco.mj_geomDistance(model, data, sensed, g, 0.05, None) for g in partners)
+        assert ok == (nearest < env.config.contact_distance)
+        assert depth >= max(-nearest, 0.0) - 2e-4  # the deepest contact, of any geom
+        verdicts.add(ok)
+    assert verdicts == {True, False}
