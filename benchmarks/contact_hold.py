@@ -64,6 +64,18 @@ def hold_statistics(success: np.ndarray) -> dict[str, float]:
     }
 
 
+def phalanx_distances(model, data, qpos, mocap_pos, mocap_quat) -> np.ndarray:
+    """(15,) each sensed phalanx's (``CONTACT_SENSORS``) nearest distance (m) to the
+    partner in this configuration, inf where it has no pair listed (``model``:
+    ``physics.native_model``, whose gap sets how far pairs are listed)."""
+    data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+    mujoco.mj_forward(model, data)
+    found, dist = (
+        data.sensordata[scene.SENSOR_LAYOUT.contacts].reshape(len(sh.CONTACT_SENSORS), 2).T
+    )
+    return np.where(found > 0, dist, np.inf)
+
+
 def group_gaps(mj_model, qpos, mocap_pos, mocap_quat, groups: np.ndarray) -> np.ndarray:
     """(...,) the largest over the success ``groups`` ((G, 15) bool; empty rows skipped) of
     the group's nearest sensed phalanx's distance (m) to the partner, per recorded pose
@@ -77,12 +89,7 @@ def group_gaps(mj_model, qpos, mocap_pos, mocap_quat, groups: np.ndarray) -> np.
             mocap_quat.reshape(-1, *mocap_quat.shape[-2:]))  # fmt: skip
     out = np.empty(flat[0].shape[0])
     for i, (q, pos, quat) in enumerate(zip(*flat)):
-        data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = q, pos, quat
-        mujoco.mj_forward(model, data)
-        found, dist = (
-            data.sensordata[scene.SENSOR_LAYOUT.contacts].reshape(len(sh.CONTACT_SENSORS), 2).T
-        )
-        nearest = np.where(found > 0, dist, np.inf)
+        nearest = phalanx_distances(model, data, q, pos, quat)
         out[i] = max(nearest[g].min() for g in groups)
     return out.reshape(lead)
 

@@ -55,6 +55,7 @@ import mujoco
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.contact_hold import phalanx_distances
 from mjx_hands import env as env_lib
 from mjx_hands import ik, physics, policies, robustness, rollouts, scene, shadow_hand
 from mjx_hands.env_config import MOCAP_SOURCES, EnvConfig
@@ -231,13 +232,9 @@ def contact_check(
     """Whether every success group ((G, 15) bool, empty rows skipped) has a phalanx within
     ``contact_distance`` of the partner in this configuration, and how deep (m, >= 0) the
     deepest agent-target contact presses in (``model``: ``physics.native_model``)."""
-    data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = qpos, mocap_pos, mocap_quat
-    mujoco.mj_forward(model, data)
-    layout = scene.SENSOR_LAYOUT
-    found, dist = data.sensordata[layout.contacts].reshape(len(shadow_hand.CONTACT_SENSORS), 2).T
-    touching = (found > 0) & (dist < contact_distance)
+    touching = phalanx_distances(model, data, qpos, mocap_pos, mocap_quat) < contact_distance
     success = all(touching[g].any() for g in groups.astype(bool) if g.any())
-    any_found, closest = data.sensordata[layout.closest]
+    any_found, closest = data.sensordata[scene.SENSOR_LAYOUT.closest]
     return bool(success), float(max(-closest, 0.0)) if any_found > 0 else 0.0
 
 
@@ -296,27 +293,30 @@ def carried_contacts(
     any_shape = np.zeros((angles.size, angles.size))
     own_shape = np.zeros((angles.size, angles.size))
     limited, misfits = np.zeros(chain.qpos_adr.size), 0
+    inside_30 = _within(angles, 30)
+    # Each pair's contact shape and IK start, the same in every cell: on the device once.
+    shapes = (rel_pos[won][pair_j], rel_rot[won][pair_j])
+    starts = jnp.asarray(final[won][pair_j][:, chain.qpos_adr])
     for r, pitch in enumerate(np.radians(angles)):  # rows: pitch, as the orientation sweep
         for c, yaw in enumerate(np.radians(angles)):
             tilt = np.tile(np.asarray(env_lib.yaw_pitch_quat(yaw, pitch)), (episodes, 1))
             turned = reset(keys, tilt)
             target = turned.info["episode"]
-            arm = np.asarray(solve(rel_pos[won][pair_j], rel_rot[won][pair_j],
-                                   target.target_pos[pair_i], target.target_rot[pair_i],
-                                   jnp.asarray(final[won][pair_j][:, chain.qpos_adr]),
-                                   jax.random.split(jax.random.PRNGKey(r * 100 + c), pair_i.size)))  # fmt: skip
+            key = jax.random.PRNGKey(r * 100 + c)
+            arm = np.asarray(solve(*shapes, target.target_pos[pair_i], target.target_rot[pair_i],
+                                   starts, jax.random.split(key, pair_i.size)))  # fmt: skip
+            mocap_pos = np.asarray(turned.pipeline_state.mocap_pos)  # one copy a cell
+            mocap_quat = np.asarray(turned.pipeline_state.mocap_quat)
             fits = np.zeros(pair_i.size, bool)
             for k, (i, j) in enumerate(zip(pair_i, pair_j)):
                 qpos = final[won[j]].copy()
                 qpos[chain.qpos_adr] = arm[k]
-                ok, depth = contact_check(model, data, qpos, np.asarray(turned.pipeline_state.mocap_pos[i]),
-                                          np.asarray(turned.pipeline_state.mocap_quat[i]), groups,
+                ok, depth = contact_check(model, data, qpos, mocap_pos[i], mocap_quat[i], groups,
                                           env.config.contact_distance)  # fmt: skip
                 fits[k] = ok and depth <= depth_nominal[j] + depth_margin
             own_shape[r, c] = fits[own].mean()
             any_shape[r, c] = fits.reshape(episodes, won.size).any(axis=1).mean()
-            if abs(pitch) <= np.radians(30) + 1e-9 and abs(yaw) <= np.radians(30) + 1e-9:
-                # Which joints the misfits' best solutions leave at a limit.
+            if inside_30[r, c]:  # which joints the misfits' best solutions leave at a limit
                 at_limit = (arm <= chain.lower + 1e-3) | (arm >= chain.upper - 1e-3)
                 limited += at_limit[~fits].sum(axis=0)
                 misfits += int((~fits).sum())
