@@ -76,6 +76,12 @@ REPORTS: dict[str, list[str]] = {
         "static-then-robust-160=benchmarks/partners/clap_pilot/static_then_robust_160",
         "static-then-mixed=benchmarks/partners/handclap/seed0/static_then_mixed",
     ],
+    "benchmarks/partners/clap_long": [
+        "partner_report",
+        "static=benchmarks/partners/handclap/seed1/static",
+        "static-then-mixed=benchmarks/partners/handclap/seed1/static_then_mixed",
+        "static-then-mixed-160=benchmarks/partners/handclap/seed1/static_then_mixed_long",
+    ],
     "benchmarks/partners/handclap_velocity": [
         "partner_report",
         "static=benchmarks/partners/handclap/seed*/static",

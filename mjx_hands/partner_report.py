@@ -149,11 +149,15 @@ Run = tuple[list[dict[str, float]], object]
 
 
 def same_rows(a: list[dict[str, float]], b: list[dict[str, float]]) -> bool:
-    """Whether two runs' metrics rows are the same (NaN, e.g. no episode ended in an
-    epoch, equal to NaN)."""
+    """Whether two runs' metrics rows hold the same epochs and evaluations (NaN equal to
+    NaN). Timings are left out: a static run retrained on another machine or beside other
+    jobs (``benchmarks/partners/seeds.sh`` accepts it where its evaluations reproduce the
+    archived ones) is the same run at other speeds."""
     same = lambda x, y: x == y or (math.isnan(x) and math.isnan(y))
+    kept = lambda row: {k: v for k, v in row.items() if k == "epoch" or k.startswith("eval/")}
     return len(a) == len(b) and all(
-        r.keys() == q.keys() and all(same(v, q[k]) for k, v in r.items()) for r, q in zip(a, b)
+        kept(r).keys() == kept(q).keys() and all(same(v, kept(q)[k]) for k, v in kept(r).items())
+        for r, q in zip(a, b)
     )
 
 

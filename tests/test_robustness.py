@@ -245,7 +245,7 @@ def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_re
 
     from mjx_hands import partner_report
 
-    def write(folder, evals, partners):  # evals: per epoch, success at the end or None
+    def write(folder, evals, partners, epoch_seconds=60.0):  # evals: per epoch, or None
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "config.json").write_text(json.dumps({"partners": partners}))
         with (folder / "metrics.csv").open("w", newline="") as f:
@@ -253,7 +253,7 @@ def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_re
             out.writerow(["epoch", "time/wall_seconds", "train/success", "eval/success_final"])
             for epoch, value in enumerate(evals, start=1):
                 ended = "nan" if epoch % 2 else 0.5  # no episode ended in odd epochs
-                out.writerow([epoch, 60.0 * epoch, ended, "" if value is None else value])
+                out.writerow([epoch, epoch_seconds * epoch, ended, "" if value is None else value])
 
     rng = np.random.default_rng(1)
     static = [None, 0.5, None, 0.95, None, 1.0]  # reaches 0.9 at epoch 4: 4 minutes
@@ -295,3 +295,11 @@ def test_the_training_cost_row_times_the_first_evaluation_at_the_mark_after_a_re
     assert {r["condition"]: r for r in rows}[partner_report.TRAINING_ROW]["curriculum"] == [
         9.0, None, 1, 2,
     ]  # fmt: skip
+    # A stage resumed from a retrained static run (the same evaluations, other timings):
+    # still counted from the static stage's end, on its own clock (90 s an epoch).
+    again = tmp_path / "seed0" / "again"
+    _write_sweeps(again, rng, 1, 32, None)
+    write(again, static + robust_stage, "robust", epoch_seconds=90.0)
+    assert partner_report.main([f"again={again}", "--out", str(tmp_path / "again_out")]) == 0
+    rows = json.loads((tmp_path / "again_out" / "side_by_side.json").read_text())["rows"]
+    assert {r["condition"]: r for r in rows}[partner_report.TRAINING_ROW]["again"][0] == 13.5
