@@ -81,6 +81,7 @@ REPORTS: dict[str, list[str]] = {
         "static=benchmarks/partners/handclap/seed1/static",
         "static-then-mixed=benchmarks/partners/handclap/seed1/static_then_mixed",
         "static-then-mixed-160=benchmarks/partners/handclap/seed1/static_then_mixed_long",
+        "static-then-mixed-240=benchmarks/partners/clap_long/static_then_mixed_240",
     ],
     "benchmarks/partners/handclap_velocity": [
         "partner_report",
