@@ -155,10 +155,8 @@ def same_rows(a: list[dict[str, float]], b: list[dict[str, float]]) -> bool:
     archived ones) is the same run at other speeds."""
     same = lambda x, y: x == y or (math.isnan(x) and math.isnan(y))
     kept = lambda row: {k: v for k, v in row.items() if k == "epoch" or k.startswith("eval/")}
-    return len(a) == len(b) and all(
-        kept(r).keys() == kept(q).keys() and all(same(v, kept(q)[k]) for k, v in kept(r).items())
-        for r, q in zip(a, b)
-    )
+    same_row = lambda r, q: r.keys() == q.keys() and all(same(v, q[k]) for k, v in r.items())
+    return len(a) == len(b) and all(same_row(kept(r), kept(q)) for r, q in zip(a, b))
 
 
 def stage_start(run: Run, others: list[Run]) -> int:
