@@ -37,6 +37,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
+source benchmarks/partners/archive.sh
 task=${1:?usage: bash benchmarks/partners/seeds.sh TASK SEED...}
 shift
 [ $# -gt 0 ] || { echo "usage: bash benchmarks/partners/seeds.sh TASK SEED... (no seed given)" >&2; exit 2; }
@@ -86,18 +87,15 @@ if a != b:
 PY
 }
 
-sweep_into() {  # sweep setup $1 of this seed and copy its record into folder $2
+sweep_into() {  # sweep setup $1 of this seed and archive its record into folder $2
   local setup=$1 out=$runs/$name-sweeps/$1
-  mkdir -p "$runs/$name-sweeps" "$2"
+  mkdir -p "$runs/$name-sweeps"
   run -m mjx_hands.robustness "$runs/$name-$setup" --sweep all --episodes 32 --out "$out" \
     > "$out.log" 2>&1 || return 1
   run -m mjx_hands.naturalness "$runs/$name-$setup" --episodes 64 --out "$out" \
     >> "$out.log" 2>&1 || return 1
-  cp "$runs/$name-$setup"/{config.json,metrics.csv} "$out"/robustness_*.{json,png} \
-    "$out/naturalness.json" "$2/" || return 1
-  cp "$runs/$name-$setup.log" "$2/train.log" || return 1
-  # Paths relative to the checkout (text files only; none to rewrite is fine).
-  { grep -rlI "$root/" "$2" || true; } | xargs -r sed -i "s#$root/##g"
+  [ -f "$out/naturalness.json" ] || return 1
+  ROOT=$root archive_run "$runs/$name-$setup" "$out" "$2"
 }
 
 one_seed() {  # train, sweep and archive seed $1 into $dest.tmp; fails at its first error

@@ -9,6 +9,7 @@
 # benchmarks/partners/clap_long/static_then_mixed_240/.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
+source benchmarks/partners/archive.sh
 runs=${RUNS:-runs/partners}
 out=benchmarks/partners/clap_long/static_then_mixed_240
 python=${PYTHON:-.venv/bin/python}
@@ -18,7 +19,4 @@ nice -n 10 "$python" train.py --run-dir "$run" --resume --partners mixed --epoch
 nice -n 10 "$python" -m mjx_hands.robustness "$run" --sweep all --episodes 32 --out "$run-sweep" \
   > "$run-sweep.log" 2>&1
 nice -n 10 "$python" -m mjx_hands.naturalness "$run" --episodes 64 --out "$run-sweep" >> "$run-sweep.log" 2>&1
-mkdir -p "$out"
-cp "$run"/{config.json,metrics.csv} "$run-sweep"/robustness_*.{json,png} "$run-sweep/naturalness.json" "$out/"
-cp "$run.log" "$out/train.log"
-{ grep -rlI "$(pwd)/" "$out" || true; } | xargs -r sed -i "s#$(pwd)/##g"
+archive_run "$run" "$run-sweep" "$out"

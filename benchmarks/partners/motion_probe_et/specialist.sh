@@ -11,6 +11,7 @@
 # archived record ran these commands with the run folder runs/probe/et4-speed02).
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
+source benchmarks/partners/archive.sh
 runs=${RUNS:-runs/partners}
 out=benchmarks/partners/motion_probe_et/specialist_0.2
 python=${PYTHON:-.venv/bin/python}
@@ -20,7 +21,4 @@ nice -n 5 "$python" train.py --run-dir "$run" --resume --partners static --targe
   --epochs 140 --observe-recent-actions 2 > "$run.log" 2>&1
 nice -n 5 "$python" -m mjx_hands.robustness "$run" --sweep motion --speeds 0 0.1 0.2 0.3 \
   --episodes 64 --out "$run-sweep" | grep '^motion:'
-mkdir -p "$out"
-cp "$run"/{config.json,metrics.csv} "$run-sweep"/robustness_motion.{json,png} "$out/"
-cp "$run.log" "$out/train.log"
-{ grep -rlI "$(pwd)/" "$out" || true; } | xargs -r sed -i "s#$(pwd)/##g"
+archive_run "$run" "$run-sweep" "$out"

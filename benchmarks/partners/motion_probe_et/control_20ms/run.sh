@@ -8,6 +8,7 @@
 # commands with the run folders runs/probe/et4-dt20-*.
 set -euo pipefail
 cd "$(dirname "$0")/../../../.."
+source benchmarks/partners/archive.sh
 python=${PYTHON:-.venv/bin/python}
 run=${RUNS:-runs/probe}/et4-dt20
 out=benchmarks/partners/motion_probe_et/control_20ms
@@ -20,10 +21,8 @@ nice -n 5 "$python" train.py --run-dir "$run-static_then_mixed" --resume --partn
   "${flags[@]}" > "$run-static_then_mixed.log" 2>&1
 for stage in static static_then_mixed; do
   nice -n 5 "$python" -m mjx_hands.robustness "$run-$stage" --sweep all --episodes 32 --out "$run-$stage-sweeps"
-  mkdir -p "$out/$stage"
-  cp "$run-$stage"/{config.json,metrics.csv} "$run-$stage-sweeps"/robustness_*.{json,png} "$out/$stage/"
-  cp "$run-$stage.log" "$out/$stage/train.log"
+  archive_run "$run-$stage" "$run-$stage-sweeps" "$out/$stage"
 done
 nice -n 5 "$python" -m benchmarks.contact_hold dt20_static="$run-static" dt20_mixed="$run-static_then_mixed" \
   --speeds 0 0.1 0.2 0.3 --episodes 64 --gaps --out "$out/contact_gaps.json"
-{ grep -rlI "$(pwd)/" "$out" || true; } | xargs -r sed -i "s#$(pwd)/##g"
+relative_paths "$out"
