@@ -344,3 +344,136 @@ def test_carried_contacts_keep_the_palm_pose_relative_to_a_turned_target():
         assert depth >= max(-nearest, 0.0) - 2e-4  # the deepest contact, of any geom
         verdicts.add(ok)
     assert verdicts == {True, False}
+
+
+def test_the_oracle_brings_the_joints_to_a_state_reached_in_one_period_where_the_goal_lags():
+    """contact_oracle.choose_setpoints: from E.T.'s start at rest, asked for the joints and
+    velocities that some hidden set-points (a few centiradians from the start, in range)
+    reach in one period of native MuJoCo, it picks set-points whose period ends at least 4
+    times nearer those joints than sending the goal joints themselves as set-points (the
+    servos lag, about 0.15 s), within the actuators' ranges."""
+    from benchmarks import contact_oracle
+    from mjx_hands import env as env_lib
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    ps = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
+    physics, adr = env.physics, env.actuated_qadr
+    lo, hi = np.asarray(env.ctrl_lo, np.float64), np.asarray(env.ctrl_hi, np.float64)
+    qpos = np.asarray(ps.qpos, np.float64)[None]
+    state = (np.zeros(1), qpos, np.zeros((1, env.mj_model.nv)))
+    mocap = (np.asarray(ps.mocap_pos)[None], np.asarray(ps.mocap_quat)[None])
+    start = qpos[:, adr]
+    hidden = np.clip(start + np.random.default_rng(0).uniform(-0.15, 0.15, start.shape), lo, hi)
+    period = lambda ctrl: physics.run(*state, ctrl, *mocap, nstep=physics.n_substeps)
+    goal_q, goal_qd = (np.asarray(x, np.float64)[:, adr] for x in period(hidden)[:2])
+    assert np.abs(goal_q - start).max() > 0.02  # the hidden set-points move the joints
+    chosen = contact_oracle.choose_setpoints(physics, state, mocap, start.copy(), goal_q,
+                                             goal_qd, adr, lo, hi)  # fmt: skip
+    assert np.all((chosen >= lo - 1e-9) & (chosen <= hi + 1e-9))
+    error = {
+        name: np.abs(np.asarray(period(ctrl)[0])[:, adr] - goal_q).max()
+        for name, ctrl in (("oracle", chosen), ("goal as set-point", np.clip(goal_q, lo, hi)))
+    }
+    assert error["goal as set-point"] > 0.01  # the lag the oracle must compensate
+    assert error["oracle"] < error["goal as set-point"] / 4, error
+
+
+def test_the_oracle_scores_success_as_the_geom_distance_within_the_contact_distance():
+    """contact_oracle.success_of on the readings native MuJoCo computes at a pose (the
+    environment's own sensors) is the index distal phalanx's MuJoCo geom distance to the
+    partner within the contact distance (E.T.'s success group), far, near and pressed."""
+    import mujoco
+
+    from benchmarks import contact_oracle
+    from mjx_hands import env as env_lib
+    from mjx_hands import physics, scene
+    from mjx_hands import shadow_hand as sh
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    start = jax.jit(env.reset)(jax.random.PRNGKey(1))
+    qpos = np.asarray(start.pipeline_state.qpos)
+    model = physics.native_model(env.mj_model, env.config.contact_distance)
+    data = mujoco.MjData(model)
+    sensed = model.geom(scene.AGENT + sh.hand_name("C_" + sh.PHALANX_BODY[("ff", "distal")])).id
+    partners = model.pair_geom2[model.pair_geom1 == sensed]
+    groups = np.asarray(env.params.success_groups[0])
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    agent_tip = data.site(scene.AGENT + sh.hand_name("S_fftip")).xpos.copy()
+    tip = np.asarray(start.info["episode"].target_points)[sh.HAND_POINTS.index("fftip")]
+    verdicts = set()
+    for offset in (0.2, 0.006, 0.0, -0.003):  # far away, near, touching, pressed
+        mocap_pos = np.asarray(start.pipeline_state.mocap_pos).copy()
+        mocap_pos[env.target_mocap] += agent_tip - tip + offset * np.array([0.0, 0.0, 1.0])
+        mocap_quat = np.asarray(start.pipeline_state.mocap_quat)
+        readings = env.physics.pose(qpos, mocap_pos, mocap_quat).sensordata
+        ok = contact_oracle.success_of(np.asarray(readings)[None], groups,
+                                       env.config.contact_distance)[0]  # fmt: skip
+        data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+        mujoco.mj_forward(model, data)
+        nearest = min(mujoco.mj_geomDistance(model, data, sensed, g, 0.05, None) for g in partners)
+        assert ok == (nearest < env.config.contact_distance), (offset, nearest)
+        verdicts.add(bool(ok))
+    assert verdicts == {True, False}
+
+
+def test_the_oracle_carries_the_rest_palm_pose_by_the_partner_displacement():
+    """contact_oracle.carried_joints: the chain's forward kinematics of the joints it gives
+    puts the palm at its rest position plus the partner's displacement, with the rest
+    orientation, a few centimetres each way from a pose clear of the joint limits."""
+    import jax.numpy as jnp
+
+    from benchmarks import contact_oracle
+    from mjx_hands import env as env_lib
+    from mjx_hands import ik
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    chain = env.chain
+    rest = (0.5 * (chain.lower + chain.upper))[None]  # clear of the limits, each way
+    shifts = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [0.02, -0.02, 0.01], [0.0, 0.01, -0.02]])
+    carried, error = contact_oracle.carried_joints(chain, rest, shifts[:, None])
+    pos0, rot0 = (np.asarray(x) for x in ik.forward(chain, jnp.asarray(rest[0])))
+    for shift, joints in zip(shifts, carried[:, 0]):
+        pos, rot = (np.asarray(x) for x in ik.forward(chain, jnp.asarray(joints)))
+        np.testing.assert_allclose(pos, pos0 + shift, atol=1e-3)
+        np.testing.assert_allclose(rot, rot0, atol=1e-2)
+    np.testing.assert_allclose(error, 0.0, atol=1e-3)  # reached, and said so
+
+
+def test_the_reactive_oracle_extrapolates_the_partner_at_its_last_velocity():
+    """contact_oracle.seen_partner: the prescient oracle sees the true path; the reactive
+    one, at rest before the first step, each next pose one step's last displacement on,
+    which misses a turn by exactly the change of displacement."""
+    from benchmarks import contact_oracle
+
+    steps = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 2.0], [0.0, 2.0]])
+    path = np.cumsum(steps, axis=0)[:, None]  # (T+1, 1 episode, 2)
+    assert contact_oracle.seen_partner(path, True) is path
+    seen = contact_oracle.seen_partner(path, False)
+    expected = [path[0], path[0], path[1] + steps[1], path[2] + steps[2], path[3] + steps[3]]
+    np.testing.assert_allclose(seen, np.stack(expected))
+    np.testing.assert_allclose(seen[3, 0] - path[3, 0], steps[2] - steps[3])  # the turn, unforeseen
+
+
+def test_the_oracle_keeps_a_rest_pose_pressed_past_a_joint_limit_where_the_partner_rests():
+    """contact_oracle.carried_joints from a wrist pressed past its limit (as a contact
+    presses it): with no displacement, the rest joints exactly (an IK that clips to the
+    limits would move them), and where a displacement needs that joint further past it,
+    the palm error it reports is the forward kinematics' distance from the carried goal."""
+    import jax.numpy as jnp
+
+    from benchmarks import contact_oracle
+    from mjx_hands import env as env_lib
+    from mjx_hands import ik
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    chain = env.chain
+    rest = 0.5 * (chain.lower + chain.upper)
+    rest[4] = chain.upper[4] + 0.01  # WRJ1, 10 mrad past its upper limit
+    carried, error = contact_oracle.carried_joints(chain, rest[None], np.array([[[0.0, 0.0, 0.0]],
+                                                                                [[0.01, 0.0, 0.0]]]))  # fmt: skip
+    np.testing.assert_allclose(carried[0, 0], rest, atol=1e-6)
+    assert error[0, 0] < 1e-5
+    pos0 = np.asarray(ik.forward(chain, jnp.asarray(rest))[0])
+    pos1 = np.asarray(ik.forward(chain, jnp.asarray(carried[1, 0]))[0])
+    assert error[1, 0] == pytest.approx(np.linalg.norm(pos1 - pos0 - [0.01, 0.0, 0.0]), abs=1e-4)
