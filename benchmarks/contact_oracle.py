@@ -23,6 +23,12 @@ this controller holds contact, a target at that speed is within the arm's reach 
 a policy lacks is control; where it does not, the arm cannot hold that shape of contact.
 The policy itself, scored on the same moving episodes from its usual start, is reported
 beside it.
+
+Caveat, measured: it aims at the rest *joints*, not at the contact. On E.T. (the actions
+variant's seed 4 static run, 32 episodes) it holds 0.94 at rest but about 0.16 at 0.1 and
+0.2 m/s, where the policy holds 0.69: the contact is held by force with the wrist at its
+limits, which carrying the joint shape does not reproduce. Its failures bound nothing
+until its goal is the contact itself (the success phalanx's gap and a press force).
 """
 
 from __future__ import annotations
