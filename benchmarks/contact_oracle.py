@@ -41,7 +41,8 @@ import numpy as np
 
 from benchmarks import contact_hold, machine
 from mjx_hands import env as env_lib
-from mjx_hands import ik, policies, rewards, robustness, rollouts, scene
+from mjx_hands import ik, policies, rewards, robustness, rollouts
+from mjx_hands import physics as physics_lib
 
 FD_STEP = 1e-2
 """Set-point perturbation of the finite differences (rad, the actuators' units)."""
@@ -81,12 +82,15 @@ def carried_joints(chain, rest_joints: np.ndarray, displacement: np.ndarray, ite
 
 
 def success_of(sensordata: np.ndarray, groups: np.ndarray, contact_distance: float):
-    """(n,) bool: the task's success rule on (n, nsensordata) readings of the last substep
-    (as ``physics.sensor_readings`` and ``rewards.success`` score an environment step)."""
-    layout = scene.SENSOR_LAYOUT
-    per_geom = sensordata[:, layout.contacts].reshape(len(sensordata), -1, 2)
-    touching = (per_geom[..., 0] > 0) & (per_geom[..., 1] < contact_distance)
-    return np.asarray(rewards.success(touching.astype(np.float32), groups))
+    """(n,) bool: the task's success rule on (n, nsensordata) readings of the last substep,
+    scored as an environment step scores them (``physics.sensor_readings``, whose
+    contacts read only the sensor data, then ``rewards.success``)."""
+    none = np.zeros(0, np.float32)
+    state = physics_lib.NativeState(qpos=none, qvel=none, ctrl=none, mocap_pos=none,
+                                    mocap_quat=none, time=none, sensordata=sensordata)  # fmt: skip
+    contacts = jax.vmap(lambda d: physics_lib.sensor_readings(state.replace(sensordata=d),
+                                                             contact_distance).contacts)(sensordata)  # fmt: skip
+    return np.asarray(rewards.success(contacts, groups))
 
 
 def choose_setpoints(physics, state, mocap, ctrl, goal_q, goal_qd, act_adr, lo, hi, iterations=3):
