@@ -31,6 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 LEARNERS = "benchmarks/learners"
+CLAP = "benchmarks/partners/handclap"
 HANDSHAKE_OPTIONS = ("twin", "smoothing", "delay", "nstep3", "c51")
 
 REPORTS: dict[str, list[str]] = {
@@ -82,6 +83,16 @@ REPORTS: dict[str, list[str]] = {
         "static-then-mixed=benchmarks/partners/handclap/seed1/static_then_mixed",
         "static-then-mixed-160=benchmarks/partners/handclap/seed1/static_then_mixed_long",
         "static-then-mixed-240=benchmarks/partners/clap_long/static_then_mixed_240",
+    ],
+    # Seeds 0-2 (seed 1's 240-epoch stage was the first, archived in clap_long itself).
+    "benchmarks/partners/clap_long240": [
+        "partner_report",
+        "static=" + ",".join(f"{CLAP}/seed{s}/static" for s in range(3)),
+        "static-then-mixed=" + ",".join(f"{CLAP}/seed{s}/static_then_mixed" for s in range(3)),
+        (
+            f"static-then-mixed-240={CLAP}/seed0/static_then_mixed_long240,"
+            f"benchmarks/partners/clap_long/static_then_mixed_240,{CLAP}/seed2/static_then_mixed_long240"
+        ),
     ],
     "benchmarks/partners/handclap_velocity": [
         "partner_report",
