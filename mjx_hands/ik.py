@@ -116,6 +116,7 @@ def solve(
     iterations: int = 30,
     rotation_weight: float = 0.2,
     damping: float = 1e-3,
+    limits: tuple[jnp.ndarray, jnp.ndarray] | None = None,
 ) -> jnp.ndarray:
     """Damped least-squares IK with clipping to joint limits.
 
@@ -124,9 +125,12 @@ def solve(
       q0: (n_joints,) initial guess.
       rotation_weight: metres per radian of orientation error in the objective
         (position matters more: goals and imitation are positional).
+      limits: (lower, upper) (n_joints,) each, as data (one compile for any limits);
+        the chain's own when None.
     Returns:
       (n_joints,) joint values within limits.
     """
+    lower, upper = (chain.lower, chain.upper) if limits is None else limits
 
     def residual(q):
         pos, rot = forward(chain, q)
@@ -139,7 +143,7 @@ def solve(
         jac = jax.jacfwd(residual)(q)
         lhs = jac.T @ jac + damping * jnp.eye(q.shape[0])
         dq = -jnp.linalg.solve(lhs, jac.T @ r)
-        return jnp.clip(q + dq, chain.lower, chain.upper)
+        return jnp.clip(q + dq, lower, upper)
 
-    q0 = jnp.clip(q0, chain.lower, chain.upper)
+    q0 = jnp.clip(q0, lower, upper)
     return jax.lax.fori_loop(0, iterations, body, q0)

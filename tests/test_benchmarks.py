@@ -367,8 +367,8 @@ def test_the_oracle_brings_the_joints_to_a_state_reached_in_one_period_where_the
     period = lambda ctrl: physics.run(*state, ctrl, *mocap, nstep=physics.n_substeps)
     goal_q, goal_qd = (np.asarray(x, np.float64)[:, adr] for x in period(hidden)[:2])
     assert np.abs(goal_q - start).max() > 0.02  # the hidden set-points move the joints
-    chosen = contact_oracle.choose_setpoints(physics, state, mocap, start.copy(), goal_q,
-                                             goal_qd, adr, lo, hi)  # fmt: skip
+    chosen = contact_oracle.choose_setpoints(physics, state, mocap, start.copy(),
+                                             contact_oracle.joint_residuals(goal_q, goal_qd, adr), lo, hi)  # fmt: skip
     assert np.all((chosen >= lo - 1e-9) & (chosen <= hi + 1e-9))
     error = {
         name: np.abs(np.asarray(period(ctrl)[0])[:, adr] - goal_q).max()
@@ -376,6 +376,43 @@ def test_the_oracle_brings_the_joints_to_a_state_reached_in_one_period_where_the
     }
     assert error["goal as set-point"] > 0.01  # the lag the oracle must compensate
     assert error["oracle"] < error["goal as set-point"] / 4, error
+
+
+def test_the_oracle_brings_the_hand_points_to_where_hidden_setpoints_carry_them():
+    """contact_oracle.hand_residuals: asked for the palm centre and fingertips (the
+    environment's own point sensors) that hidden set-points reach in one period, with the
+    start's joints as the light regulariser, the oracle's period ends at least 4 times
+    nearer those points than staying put; the points are native MuJoCo's site positions."""
+    from benchmarks import contact_oracle
+    from mjx_hands import env as env_lib
+    from mjx_hands import scene
+    from mjx_hands import shadow_hand as sh
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    ps = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
+    physics, adr = env.physics, env.actuated_qadr
+    lo, hi = np.asarray(env.ctrl_lo, np.float64), np.asarray(env.ctrl_hi, np.float64)
+    qpos = np.asarray(ps.qpos, np.float64)[None]
+    state = (np.zeros(1), qpos, np.zeros((1, env.mj_model.nv)))
+    mocap = (np.asarray(ps.mocap_pos)[None], np.asarray(ps.mocap_quat)[None])
+    start = qpos[:, adr]
+    hidden = np.clip(start + np.random.default_rng(1).uniform(-0.15, 0.15, start.shape), lo, hi)
+    period = lambda ctrl: [np.asarray(x, np.float64) for x in physics.run(*state, ctrl, *mocap,
+                                                                          nstep=physics.n_substeps)]  # fmt: skip
+    q, _, _, sensordata = period(hidden)
+    data = mujoco.MjData(env.physics.native_model)
+    data.qpos[:], data.mocap_pos[:], data.mocap_quat[:] = q[0], mocap[0][0], mocap[1][0]
+    mujoco.mj_forward(env.physics.native_model, data)
+    tip = data.site(scene.AGENT + sh.hand_name("S_fftip")).xpos
+    points = sensordata[:, scene.SENSOR_LAYOUT.points].reshape(1, -1, 3)
+    # mj_step reads its sensors before the last substep's integration: 4 ms behind qpos.
+    np.testing.assert_allclose(points[0, sh.HAND_POINTS.index("fftip")], tip, atol=2e-3)
+    residuals = contact_oracle.hand_residuals(points, start, np.zeros_like(start), adr)
+    chosen = contact_oracle.choose_setpoints(physics, state, mocap, start.copy(), residuals, lo, hi)
+    assert np.all((chosen >= lo - 1e-9) & (chosen <= hi + 1e-9))
+    miss = lambda ctrl: np.abs(period(ctrl)[3][:, scene.SENSOR_LAYOUT.points] - points.reshape(1, -1)).max()
+    assert miss(start) > 0.005  # the hidden set-points move the points
+    assert miss(chosen) < miss(start) / 4, (miss(chosen), miss(start))
 
 
 def test_the_oracle_scores_success_as_the_geom_distance_within_the_contact_distance():

@@ -447,3 +447,24 @@ def test_the_ik_chain_places_its_site_where_mujoco_kinematics_does(site):
             pos, rot = map(np.asarray, forward(jnp.asarray(q, jnp.float32)))
         np.testing.assert_allclose(pos, data.site_xpos[site_id], atol=2e-6)
         np.testing.assert_allclose(rot, data.site_xmat[site_id].reshape(3, 3), atol=2e-6)
+
+
+def test_ik_limits_given_as_data_act_as_the_chains_own():
+    """ik.solve with ``limits`` passed as data (one compile for any limits) gives what a
+    chain whose own limits are those gives, and never leaves them."""
+    import dataclasses
+
+    from mjx_hands import ik
+
+    model = env_lib.HandInteractionEnv(
+        env_lib.EnvConfig(task="et", mocap_source="synthetic", physics="native")
+    ).mj_model
+    chain = ik.make_chain(model, scene.AGENT + "palm_center")
+    narrow = (chain.lower + 0.3 * (chain.upper - chain.lower), chain.upper - 0.3 * (chain.upper - chain.lower))
+    q0 = 0.5 * (chain.lower + chain.upper)
+    pos, rot = ik.forward(chain, jnp.asarray(chain.lower + 0.9 * (chain.upper - chain.lower)))
+    given = jax.jit(lambda lo, hi: ik.solve(chain, pos, rot, q0, 10, limits=(lo, hi)))(*narrow)
+    own = ik.solve(dataclasses.replace(chain, lower=narrow[0], upper=narrow[1]), pos, rot, q0, 10)
+    np.testing.assert_allclose(given, own, atol=1e-5)
+    assert np.all((np.asarray(given) >= narrow[0] - 1e-6) & (np.asarray(given) <= narrow[1] + 1e-6))
+    assert not np.allclose(given, ik.solve(chain, pos, rot, q0, 10), atol=1e-3)  # the limits bind
