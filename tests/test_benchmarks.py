@@ -346,6 +346,20 @@ def test_carried_contacts_keep_the_palm_pose_relative_to_a_turned_target():
     assert verdicts == {True, False}
 
 
+def oracle_start():
+    """(env, state (time, qpos, qvel) (1, ...), mocap poses (1, ...), actuated joints (1,
+    nu), ctrl ranges lo/hi (nu,)) of E.T.'s start at rest on native MuJoCo, float64."""
+    from mjx_hands import env as env_lib
+
+    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
+    ps = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
+    qpos = np.asarray(ps.qpos, np.float64)[None]
+    state = (np.zeros(1), qpos, np.zeros((1, env.mj_model.nv)))
+    mocap = (np.asarray(ps.mocap_pos)[None], np.asarray(ps.mocap_quat)[None])
+    ranges = (np.asarray(env.ctrl_lo, np.float64), np.asarray(env.ctrl_hi, np.float64))
+    return env, state, mocap, qpos[:, env.actuated_qadr], ranges
+
+
 def test_the_oracle_brings_the_joints_to_a_state_reached_in_one_period_where_the_goal_lags():
     """contact_oracle.choose_setpoints: from E.T.'s start at rest, asked for the joints and
     velocities that some hidden set-points (a few centiradians from the start, in range)
@@ -353,16 +367,9 @@ def test_the_oracle_brings_the_joints_to_a_state_reached_in_one_period_where_the
     times nearer those joints than sending the goal joints themselves as set-points (the
     servos lag, about 0.15 s), within the actuators' ranges."""
     from benchmarks import contact_oracle
-    from mjx_hands import env as env_lib
 
-    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
-    ps = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
+    env, state, mocap, start, (lo, hi) = oracle_start()
     physics, adr = env.physics, env.actuated_qadr
-    lo, hi = np.asarray(env.ctrl_lo, np.float64), np.asarray(env.ctrl_hi, np.float64)
-    qpos = np.asarray(ps.qpos, np.float64)[None]
-    state = (np.zeros(1), qpos, np.zeros((1, env.mj_model.nv)))
-    mocap = (np.asarray(ps.mocap_pos)[None], np.asarray(ps.mocap_quat)[None])
-    start = qpos[:, adr]
     hidden = np.clip(start + np.random.default_rng(0).uniform(-0.15, 0.15, start.shape), lo, hi)
     period = lambda ctrl: physics.run(*state, ctrl, *mocap, nstep=physics.n_substeps)
     goal_q, goal_qd = (np.asarray(x, np.float64)[:, adr] for x in period(hidden)[:2])
@@ -384,18 +391,11 @@ def test_the_oracle_brings_the_hand_points_to_where_hidden_setpoints_carry_them(
     start's joints as the light regulariser, the oracle's period ends at least 4 times
     nearer those points than staying put; the points are native MuJoCo's site positions."""
     from benchmarks import contact_oracle
-    from mjx_hands import env as env_lib
     from mjx_hands import scene
     from mjx_hands import shadow_hand as sh
 
-    env = env_lib.make_env("et", mocap_source="synthetic", physics="native")
-    ps = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
+    env, state, mocap, start, (lo, hi) = oracle_start()
     physics, adr = env.physics, env.actuated_qadr
-    lo, hi = np.asarray(env.ctrl_lo, np.float64), np.asarray(env.ctrl_hi, np.float64)
-    qpos = np.asarray(ps.qpos, np.float64)[None]
-    state = (np.zeros(1), qpos, np.zeros((1, env.mj_model.nv)))
-    mocap = (np.asarray(ps.mocap_pos)[None], np.asarray(ps.mocap_quat)[None])
-    start = qpos[:, adr]
     hidden = np.clip(start + np.random.default_rng(1).uniform(-0.15, 0.15, start.shape), lo, hi)
     period = lambda ctrl: [np.asarray(x, np.float64) for x in physics.run(*state, ctrl, *mocap,
                                                                           nstep=physics.n_substeps)]  # fmt: skip
