@@ -415,6 +415,20 @@ def test_the_oracle_brings_the_hand_points_to_where_hidden_setpoints_carry_them(
     assert miss(chosen) < miss(start) / 4, (miss(chosen), miss(start))
 
 
+def test_the_oracle_weights_the_tips_of_the_fingers_its_success_groups_name():
+    """contact_oracle.contact_point_weights: E.T. (index distal) weights the index tip
+    alone, the clap (four fingers' distal and middle phalanges) those four tips, never the
+    palm centre or a finger no group names."""
+    from benchmarks import contact_oracle
+    from mjx_hands import reward_params
+    from mjx_hands import shadow_hand as sh
+
+    for task, weighted in (("et", {"fftip"}), ("handclap", {"fftip", "mftip", "rftip", "lftip"})):
+        weights = contact_oracle.contact_point_weights(np.asarray(reward_params.success_group_mask(task)), 7.0)
+        assert {p for p, w in zip(sh.HAND_POINTS, weights) if w == 7.0} == weighted
+        assert all(w == 1.0 for p, w in zip(sh.HAND_POINTS, weights) if p not in weighted)
+
+
 def test_the_oracle_scores_success_as_the_geom_distance_within_the_contact_distance():
     """contact_oracle.success_of on the readings native MuJoCo computes at a pose (the
     environment's own sensors) is the index distal phalanx's MuJoCo geom distance to the
