@@ -132,6 +132,13 @@ REPORTS: dict[str, list[str]] = {
             "benchmarks/partners/et_actions/seed*/static_then_mixed_continuous"
         ),
     ],
+    "benchmarks/partners/et_actions_kc1": [
+        "partner_report",
+        "actions-static=benchmarks/partners/et_actions/seed*/static",
+        "actions-static-then-mixed=benchmarks/partners/et_actions/seed*/static_then_mixed",
+        "kc1-static=benchmarks/partners/et_actions_kc1/seed*/static",
+        "kc1-static-then-mixed=benchmarks/partners/et_actions_kc1/seed*/static_then_mixed",
+    ],
     **{
         f"benchmarks/partners/{task}_actions": [
             "partner_report",
